@@ -1,0 +1,17 @@
+"""Exceptions raised by slime_match; the CLI turns each into one line and a non-zero exit code."""
+
+
+class SlimeMatchError(Exception):
+    """Base class of every error this package raises on purpose."""
+
+
+class ImageError(SlimeMatchError):
+    """An input image is missing, unreadable, not an image, or unusable (e.g. smaller than 32 px)."""
+
+
+class WeightsNotFoundError(SlimeMatchError):
+    """Model weights are neither cached nor downloadable; the message names weight-free alternatives."""
+
+
+class ConfigError(SlimeMatchError, ValueError):
+    """An unknown method/option name or an invalid parameter value."""
