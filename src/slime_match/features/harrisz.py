@@ -1,0 +1,433 @@
+"""HarrisZ+ corner detector: colour-aware, multi-scale Harris with z-score response and uniform ranking.
+
+Implements ALGORITHMS.md section 1 (Bellavia & Mishkin, PRL 2022). The image work (upsampling, gradients,
+Gaussian filtering, response, peak finding) runs in torch on the input's device; the few thousand peaks
+then go to NumPy/SciPy on the CPU for the greedy spatial selections, which are exact greedy results
+computed with a vectorised dependency-resolution scheme over k-d tree neighbour pairs (no per-point loop).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from scipy.spatial import cKDTree
+
+from slime_match.errors import ConfigError, ImageError
+from slime_match.types import Keypoints
+
+logger = logging.getLogger("slime_match")
+
+_SQRT2 = math.sqrt(2.0)
+_GREY_WEIGHTS = (0.299, 0.587, 0.114)
+
+
+@dataclass
+class HarrisZConfig:
+    """HarrisZ+ parameters (defaults from ALGORITHMS.md section 1).
+
+    Attributes:
+        max_keypoints: N, the cap on the output and the density of the uniform spatial ranking.
+        num_levels: scale levels k = 0..num_levels-1, integration sigma sqrt(2)^k, derivative sigma / sqrt(2).
+        upsampled_levels: levels k below this run on the 2x Lanczos-upsampled image with doubled sigmas.
+        peak_window: side (working pixels) of the window in which a peak must be the unique maximum.
+        mask_threshold: minimum soft gradient-mask value at a peak.
+        min_axis_ratio: keypoints with axis ratio sqrt(l_min / l_max) <= this are dropped.
+        ellipse_factor: ellipse semi-axes are ellipse_factor * s_i and ellipse_factor * s_i * q.
+        min_ellipse_sigma: lower clamp of the original-image sigma s_i used for the ellipse size.
+        dedup_radius: keypoints of the upsampled levels closer than this (pixels) to a stronger one are dropped.
+        color: use the colour "best" gradient field for the mask when the input is RGB.
+    """
+
+    max_keypoints: int = 8000
+    num_levels: int = 5
+    upsampled_levels: int = 2
+    peak_window: int = 7
+    mask_threshold: float = 0.31
+    min_axis_ratio: float = 0.25
+    ellipse_factor: float = 3.0
+    min_ellipse_sigma: float = _SQRT2
+    dedup_radius: float = 1.0
+    color: bool = True
+
+    def __post_init__(self) -> None:
+        if self.max_keypoints < 1:
+            raise ConfigError(f"max_keypoints must be >= 1, got {self.max_keypoints}")
+        if self.num_levels < 1 or not 0 <= self.upsampled_levels <= self.num_levels:
+            raise ConfigError("need num_levels >= 1 and 0 <= upsampled_levels <= num_levels")
+        if self.peak_window < 3 or self.peak_window % 2 == 0:
+            raise ConfigError(f"peak_window must be odd and >= 3, got {self.peak_window}")
+
+    @classmethod
+    def from_dict(cls, options: dict) -> HarrisZConfig:
+        """Build a config from a dict of option names, raising ConfigError for unknown names."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise ConfigError(f"unknown HarrisZ+ option(s) {unknown}; valid options: {sorted(known)}")
+        return cls(**options)
+
+
+def detect_harrisz(image: torch.Tensor, config: HarrisZConfig | None = None) -> Keypoints:
+    """Detect HarrisZ+ keypoints with affine ellipses.
+
+    Args:
+        image: (3, H, W) RGB or (1, H, W) grey float image in [0, 1], on any device.
+        config: detector parameters; defaults when None.
+
+    Returns:
+        Keypoints on the image's device, in uniform-spatial-ranking order: xy (N, 2) in original-image
+        pixels (centre of the top-left pixel = (0, 0)), ellipse (N, 2, 2), response (N,) = z-score Harris
+        response R, level (N,) in 0..num_levels-1. Empty (N = 0) for a blank image or an image smaller
+        than the largest Gaussian kernel needs.
+    """
+    cfg = config or HarrisZConfig()
+    if image.ndim != 3 or image.shape[0] not in (1, 3):
+        raise ImageError(f"HarrisZ+ expects a (3, H, W) or (1, H, W) image tensor, got {tuple(image.shape)}")
+    if not image.is_floating_point():
+        raise ImageError(f"HarrisZ+ expects a float image in [0, 1], got dtype {image.dtype}")
+    device = image.device
+    img = image.float()
+    height, width = img.shape[-2:]
+    largest_radius = _kernel_radius(_SQRT2 ** (cfg.num_levels - 1))
+    if min(height, width) <= 2 * largest_radius:
+        logger.debug("HarrisZ+: image %dx%d too small for the filters, no keypoints", width, height)
+        return _empty_keypoints(device)
+
+    gradients: dict[int, tuple[torch.Tensor, torch.Tensor]] = {}
+    parts = []
+    for k in range(cfg.num_levels):
+        factor = 2 if k < cfg.upsampled_levels else 1
+        if factor not in gradients:
+            work = _lanczos_upsample2(img) if factor == 2 else img
+            gradients[factor] = _gradient_fields(work, cfg.color)
+        parts.append(_detect_level(*gradients[factor], k, factor, cfg))
+    xy, ellipse, response, level = (np.concatenate(a) for a in zip(*parts))
+
+    upsampled = np.flatnonzero(level < cfg.upsampled_levels)
+    if cfg.upsampled_levels > 1 and len(upsampled):
+        order = upsampled[_priority_order(response[upsampled], level[upsampled])]
+        kept = _greedy_keep(xy[order], cfg.dedup_radius)
+        drop = np.ones(len(xy), bool)
+        drop[order[kept]] = False
+        drop[level >= cfg.upsampled_levels] = False
+        xy, ellipse, response, level = xy[~drop], ellipse[~drop], response[~drop], level[~drop]
+
+    order = _priority_order(response, level)
+    radius = 2.0 * math.sqrt(2.0 * height * width / (math.pi * cfg.max_keypoints))
+    ranked = order[_uniform_ranking(xy[order], radius, cfg.max_keypoints)]
+    logger.debug("HarrisZ+: %d keypoints (pool %d) on %dx%d", len(ranked), len(order), width, height)
+    return Keypoints(
+        xy=torch.from_numpy(xy[ranked].astype(np.float32)).to(device),
+        ellipse=torch.from_numpy(ellipse[ranked].astype(np.float32)).to(device),
+        response=torch.from_numpy(response[ranked].astype(np.float32)).to(device),
+        level=torch.from_numpy(level[ranked].astype(np.int64)).to(device),
+    )
+
+
+def _empty_keypoints(device: torch.device) -> Keypoints:
+    return Keypoints(
+        xy=torch.zeros(0, 2, device=device),
+        ellipse=torch.zeros(0, 2, 2, device=device),
+        response=torch.zeros(0, device=device),
+        level=torch.zeros(0, dtype=torch.int64, device=device),
+    )
+
+
+def _kernel_radius(sigma: float) -> int:
+    return max(1, math.ceil(3.0 * sigma))
+
+
+def _lanczos_weights(frac: float) -> torch.Tensor:
+    """(8,) normalised Lanczos-4 weights of the taps at floor(x) - 3 .. floor(x) + 4, frac = x - floor(x)."""
+    d = np.arange(8) - 3 - frac
+    w = np.sinc(d) * np.sinc(d / 4.0)
+    return torch.from_numpy(w / w.sum()).float()
+
+
+def _lanczos_upsample2(image: torch.Tensor) -> torch.Tensor:
+    """2x Lanczos-4 upsampling in torch, equivalent to ``cv2.resize(..., INTER_LANCZOS4)`` inside the image.
+
+    Output pixel u samples the input at u / 2 - 0.25 (pixel-centre convention), so each axis is a two-phase
+    8-tap filter (phase fractions 0.75 and 0.25); borders are replicated.
+
+    Args:
+        image: (C, H, W) float.
+
+    Returns:
+        (C, 2H, 2W) float.
+    """
+    w_even, w_odd = _lanczos_weights(0.75).tolist(), _lanczos_weights(0.25).tolist()
+
+    def along_last(x: torch.Tensor) -> torch.Tensor:
+        n = x.shape[-1]
+        p = F.pad(x, (4, 4), mode="replicate")
+        even = sum(w * p[..., t : t + n] for t, w in enumerate(w_even))
+        odd = sum(w * p[..., t + 1 : t + 1 + n] for t, w in enumerate(w_odd))
+        return torch.stack((even, odd), dim=-1).flatten(-2)
+
+    rows = along_last(image)
+    return along_last(rows.transpose(-1, -2)).transpose(-1, -2).contiguous()
+
+
+def _central_gradient(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Central differences of (C, H, W) with replicated borders; returns (d/dx, d/dy), each (C, H, W)."""
+    p = F.pad(x[None], (1, 1, 1, 1), mode="replicate")[0]
+    return 0.5 * (p[:, 1:-1, 2:] - p[:, 1:-1, :-2]), 0.5 * (p[:, 2:, 1:-1] - p[:, :-2, 1:-1])
+
+
+def _gradient_fields(image: torch.Tensor, color: bool) -> tuple[torch.Tensor, torch.Tensor]:
+    """Grey gradient (Harris tensor) and mask gradient ("best" colour field or grey) of one working image.
+
+    Args:
+        image: (C, H, W) with C in {1, 3}.
+        color: build the colour best field when C == 3.
+
+    Returns:
+        grey_grad (2, H, W) and mask_grad (2, H, W): x and y components.
+    """
+    if image.shape[0] == 3:
+        weights = torch.tensor(_GREY_WEIGHTS, dtype=image.dtype, device=image.device)
+        grey = (image * weights[:, None, None]).sum(0, keepdim=True)
+    else:
+        grey = image
+    gx, gy = _central_gradient(grey)
+    grey_grad = torch.cat((gx, gy))
+    if not (color and image.shape[0] == 3):
+        return grey_grad, grey_grad
+    mx, my = _central_gradient(image.amax(0, keepdim=True))
+    max_grad = torch.cat((mx, my))
+    best = torch.where(max_grad.abs() > grey_grad.abs(), max_grad, grey_grad)
+    return grey_grad, best
+
+
+def _gaussian_blur(x: torch.Tensor, sigma: float) -> torch.Tensor:
+    """Separable Gaussian smoothing of (C, H, W) with reflected borders, radius ceil(3 sigma).
+
+    Implemented as shifted multiply-adds (much faster than single-channel conv2d on CPU).
+    """
+    r = _kernel_radius(sigma)
+    t = np.arange(-r, r + 1)
+    k = np.exp(-(t**2) / (2.0 * sigma**2))
+    k = (k / k.sum()).tolist()
+    height, width = x.shape[-2:]
+    p = F.pad(x[None], (r, r, r, r), mode="reflect")[0]
+    rows = k[r] * p[:, :, r : r + width]
+    for i in range(1, r + 1):
+        rows.add_(p[:, :, r - i : r - i + width] + p[:, :, r + i : r + i + width], alpha=k[r + i])
+    out = k[r] * rows[:, r : r + height]
+    for i in range(1, r + 1):
+        out.add_(rows[:, r - i : r - i + height] + rows[:, r + i : r + i + height], alpha=k[r + i])
+    return out
+
+
+def _zscore(x: torch.Tensor) -> torch.Tensor:
+    std = x.std()
+    if not bool(std > 0):
+        return torch.zeros_like(x)
+    return (x - x.mean()) / std
+
+
+def _detect_level(
+    grey_grad: torch.Tensor, mask_grad: torch.Tensor, k: int, factor: int, cfg: HarrisZConfig
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Keypoints of one scale level.
+
+    Args:
+        grey_grad, mask_grad: (2, h, w) raw gradients of the working image (original or 2x).
+        k: level index; integration sigma sqrt(2)^k and derivative sigma sqrt(2)^(k-1) in original pixels.
+        factor: working-image scale (2 on upsampled levels, else 1).
+        cfg: detector parameters.
+
+    Returns:
+        xy (n, 2) original-image pixels, ellipse (n, 2, 2), response (n,), level (n,), as NumPy arrays.
+    """
+    s_i = _SQRT2**k
+    s_d = s_i / _SQRT2
+    same_field = mask_grad is grey_grad
+    fields_ = grey_grad if same_field else torch.cat((grey_grad, mask_grad))
+    smooth = _gaussian_blur(fields_, s_d * factor)
+    gx, gy = smooth[0], smooth[1]
+    bx, by = (gx, gy) if same_field else (smooth[2], smooth[3])
+    magnitude = torch.sqrt(bx * bx + by * by)
+    mask = _gaussian_blur((magnitude > magnitude.mean()).to(magnitude.dtype)[None], s_d * factor)[0]
+    dx, dy = gx * mask, gy * mask
+    tensor = _gaussian_blur(torch.stack((dx * dx, dy * dy, dx * dy)), s_i * factor)
+    a, b, c = tensor[0], tensor[1], tensor[2]
+    response = _zscore(a * b - c * c) - _zscore((a + b) ** 2)
+
+    ys, xs = _unique_peaks(response, mask, cfg.peak_window, cfg.mask_threshold)
+    if len(ys) == 0:
+        return _empty_level()
+    ys_t = torch.from_numpy(ys).to(response.device)
+    xs_t = torch.from_numpy(xs).to(response.device)
+    values = torch.stack(
+        (
+            response[ys_t, xs_t],
+            response[ys_t, xs_t - 1],
+            response[ys_t, xs_t + 1],
+            response[ys_t - 1, xs_t],
+            response[ys_t + 1, xs_t],
+            a[ys_t, xs_t],
+            b[ys_t, xs_t],
+            c[ys_t, xs_t],
+        ),
+        dim=1,
+    ).double().cpu().numpy()
+
+    order = np.argsort(-values[:, 0], kind="stable")
+    peaks_xy = np.stack((xs, ys), axis=1).astype(np.float64)
+    keep = order[_greedy_keep(peaks_xy[order], math.ceil(3.0 * s_d * factor))]
+    values, peaks_xy = values[keep], peaks_xy[keep]
+
+    r0, rl, rr, ru, rd = values[:, :5].T
+    u = peaks_xy[:, 0] + 0.5 * (rl - rr) / (rl - 2.0 * r0 + rr)
+    v = peaks_xy[:, 1] + 0.5 * (ru - rd) / (ru - 2.0 * r0 + rd)
+    if factor == 2:
+        u, v = (u + 0.5) / 2.0 - 0.5, (v + 0.5) / 2.0 - 0.5
+
+    ellipse, q = _ellipse_from_tensor(
+        values[:, 5], values[:, 6], values[:, 7], cfg.ellipse_factor * max(s_i, cfg.min_ellipse_sigma)
+    )
+    good = q > cfg.min_axis_ratio
+    xy = np.stack((u, v), axis=1)[good]
+    return xy, ellipse[good], r0[good], np.full(int(good.sum()), k, np.int64)
+
+
+def _empty_level() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    return np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(0, np.int64)
+
+
+def _unique_peaks(
+    response: torch.Tensor, mask: torch.Tensor, window: int, mask_threshold: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels that are the unique maximum of their window, with response > 0 and mask > threshold.
+
+    Peaks whose window leaves the image are ignored. Returns row and column indices (int64 NumPy arrays).
+    """
+    h = window // 2
+    height, width = response.shape
+    pooled = F.max_pool2d(response[None, None], window, stride=1, padding=h)[0, 0]
+    candidate = (response == pooled) & (response > 0) & (mask > mask_threshold)
+    inner = torch.zeros_like(candidate)
+    inner[h : height - h, h : width - h] = True
+    ys, xs = torch.nonzero(candidate & inner, as_tuple=True)
+    if len(ys) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    offsets = torch.arange(-h, h + 1, device=response.device)
+    patch = response[(ys[:, None] + offsets)[:, :, None], (xs[:, None] + offsets)[:, None, :]]
+    unique = (patch == response[ys, xs][:, None, None]).flatten(1).sum(1) == 1
+    return ys[unique].cpu().numpy(), xs[unique].cpu().numpy()
+
+
+def _ellipse_from_tensor(
+    a: np.ndarray, b: np.ndarray, c: np.ndarray, semi_axis: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Ellipse matrices from second-moment matrices U = [[a, c], [c, b]].
+
+    The semi-axis along the weak-gradient eigenvector is ``semi_axis``, along the strong one ``semi_axis * q``
+    with q = sqrt(l_min / l_max).
+
+    Returns:
+        E (n, 2, 2) with region (x - c)^T E (x - c) <= 1, and q (n,) (0 where U vanishes).
+    """
+    half_trace = 0.5 * (a + b)
+    root = np.sqrt((0.5 * (a - b)) ** 2 + c**2)
+    l_max = half_trace + root
+    l_min = np.maximum(half_trace - root, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = np.where(l_max > 0, np.sqrt(l_min / l_max), 0.0)
+    theta = 0.5 * np.arctan2(2.0 * c, a - b)  # direction of the strong-gradient eigenvector
+    strong = np.stack((np.cos(theta), np.sin(theta)), axis=1)
+    weak = np.stack((-strong[:, 1], strong[:, 0]), axis=1)
+    long_axis = np.broadcast_to(np.asarray(semi_axis, dtype=np.float64), a.shape)
+    short_axis = np.maximum(long_axis * q, 1e-12)
+    ellipse = (
+        weak[:, :, None] * weak[:, None, :] / long_axis[:, None, None] ** 2
+        + strong[:, :, None] * strong[:, None, :] / short_axis[:, None, None] ** 2
+    )
+    return ellipse, q
+
+
+def _priority_order(response: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """Indices sorted by response descending, then level ascending."""
+    return np.lexsort((level, -response))
+
+
+def _neighbour_pairs(xy: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (i, j), i < j, of points closer than ``radius`` (strictly)."""
+    if len(xy) < 2 or radius <= 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    pairs = cKDTree(xy).query_pairs(radius, output_type="ndarray")
+    if len(pairs) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    i, j = pairs.min(1), pairs.max(1)
+    close = np.sum((xy[i] - xy[j]) ** 2, axis=1) < radius**2
+    return i[close].astype(np.int64), j[close].astype(np.int64)
+
+
+def _greedy_mis(n: int, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Exact greedy maximal independent set in index order, resolved in parallel.
+
+    Node j is kept iff no kept node i < j is its neighbour. Each pass removes the nodes with a kept stronger
+    neighbour and keeps the nodes whose stronger neighbours are all removed (the first undecided node is
+    always kept, so the loop terminates); edges to decided nodes are discarded as it goes.
+
+    Args:
+        n: number of nodes, in priority order (0 = strongest).
+        i, j: (E,) edges with i < j.
+
+    Returns:
+        (n,) bool keep mask.
+    """
+    state = np.zeros(n, np.int8)  # 0 undecided, 1 kept, -1 removed
+    while True:
+        live = (state[j] == 0) & (state[i] >= 0)
+        i, j = i[live], j[live]
+        undecided = state == 0
+        if not undecided.any():
+            return state == 1
+        beaten = np.zeros(n, bool)
+        beaten[j[state[i] == 1]] = True
+        state[undecided & beaten] = -1
+        waiting = np.zeros(n, bool)
+        waiting[j[state[i] == 0]] = True
+        state[(state == 0) & ~waiting] = 1
+
+
+def _greedy_keep(xy: np.ndarray, radius: float) -> np.ndarray:
+    """Indices of the greedy subset of priority-sorted points pairwise >= radius apart (increasing)."""
+    i, j = _neighbour_pairs(xy, radius)
+    return np.flatnonzero(_greedy_mis(len(xy), i, j))
+
+
+def _uniform_ranking(xy: np.ndarray, radius: float, limit: int) -> np.ndarray:
+    """Uniform spatial ranking of priority-sorted points.
+
+    Repeatedly takes the greedy subset (points >= radius apart) of the remaining pool and appends it, in
+    priority order, until ``limit`` points are collected or the pool is empty.
+
+    Returns:
+        Indices into ``xy`` in ranking order, at most ``limit`` of them.
+    """
+    n = len(xy)
+    i, j = _neighbour_pairs(xy, radius)
+    remaining = np.arange(n)
+    rounds = []
+    collected = 0
+    while len(remaining) and collected < limit:
+        position = np.full(n, -1, np.int64)
+        position[remaining] = np.arange(len(remaining))
+        live = (position[i] >= 0) & (position[j] >= 0)
+        i, j = i[live], j[live]
+        kept = _greedy_mis(len(remaining), position[i], position[j])
+        rounds.append(remaining[kept])
+        collected += int(kept.sum())
+        remaining = remaining[~kept]
+    if not rounds:
+        return np.zeros(0, np.int64)
+    return np.concatenate(rounds)[:limit]
