@@ -1,0 +1,142 @@
+"""Blob matching: many-to-many candidate matches ranked by a context-aware nearest-neighbour ratio.
+
+Steps (ALGORITHMS.md section 3): blocked L2 distances; shortlist the pairs within the k smallest of both
+their row and their column; greedy many-to-many acceptance with at most p_n pairs per keypoint; score
+each accepted pair by 2v / (v_r + v_c), where v_r and v_c are the nearest competitors of the row and the
+column located farther than ``context_radius`` from the partner keypoint.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+import torch
+
+from ..errors import ConfigError
+from ..types import Matches
+from .nn import knn, nearest_far
+
+
+@dataclass
+class BlobConfig:
+    """Blob matching parameters.
+
+    Attributes:
+        shortlist_k: a pair survives when it is within the k smallest distances of its row and column.
+        max_per_keypoint: p_n, the most accepted pairs per keypoint in each image.
+        context_radius: competitors closer than this (pixels) to the partner keypoint are ignored.
+        block_size: descriptor rows per distance block (memory ~ 3 * block_size * M floats).
+    """
+
+    shortlist_k: int = 10
+    max_per_keypoint: int = 3
+    context_radius: float = 16.0
+    block_size: int = 1024
+
+    def __post_init__(self) -> None:
+        for name in ("shortlist_k", "max_per_keypoint", "block_size"):
+            if int(getattr(self, name)) < 1:
+                raise ConfigError(f"BlobConfig.{name} must be >= 1, got {getattr(self, name)}")
+        if self.context_radius < 0:
+            raise ConfigError(f"BlobConfig.context_radius must be >= 0 px, got {self.context_radius}")
+
+    @classmethod
+    def from_dict(cls, options: dict) -> BlobConfig:
+        """Config from a dict; unknown keys raise ConfigError."""
+        names = {f.name for f in fields(cls)}
+        unknown = set(options) - names
+        if unknown:
+            raise ConfigError(f"unknown BlobConfig option(s) {sorted(unknown)}: valid are {sorted(names)}")
+        return cls(**options)
+
+
+def greedy_many_to_many(rows: np.ndarray, cols: np.ndarray, values: np.ndarray, max_per: int) -> np.ndarray:
+    """Greedy many-to-many acceptance, vectorised.
+
+    Equivalent to walking the pairs by ascending value and accepting (i, j) while row i and column j each
+    hold fewer than ``max_per`` accepted pairs. Resolved in rounds: a pair is accepted once even all
+    undecided earlier pairs of its row and column could not fill them, rejected once accepted earlier
+    pairs already do; the earliest undecided pair is always decidable, so the loop ends.
+
+    Args:
+        rows, cols: (P,) int pair indices (no duplicate pairs); values: (P,) sort keys.
+        max_per: p_n.
+
+    Returns:
+        (P,) bool accepted mask.
+    """
+    p = len(values)
+    order = np.argsort(values, kind="stable")
+    rank = np.empty(p, np.int64)
+    rank[order] = np.arange(p)
+    groupings = []
+    for key in (rows, cols):
+        perm = np.lexsort((rank, key))
+        k = key[perm]
+        start = np.r_[True, k[1:] != k[:-1]]
+        groupings.append((perm, np.maximum.accumulate(np.where(start, np.arange(p), 0))))
+    accepted = np.zeros(p, bool)
+    undecided = np.ones(p, bool)
+    while undecided.any():
+        can_accept = undecided.copy()
+        must_reject = np.zeros(p, bool)
+        for perm, first in groupings:
+            acc_before = _exclusive_group_cumsum(accepted[perm], first)
+            any_before = _exclusive_group_cumsum((accepted | undecided)[perm], first)
+            can_accept[perm] &= any_before < max_per
+            must_reject[perm] |= acc_before >= max_per
+        must_reject &= undecided
+        accepted |= can_accept
+        undecided &= ~(can_accept | must_reject)
+    return accepted
+
+
+def _exclusive_group_cumsum(flags: np.ndarray, first: np.ndarray) -> np.ndarray:
+    """Count of set flags before each position within its group (``first``: index of the group start)."""
+    c = np.cumsum(flags, dtype=np.int64) - flags
+    return c - c[first]
+
+
+def blob_match(desc0: torch.Tensor, desc1: torch.Tensor, xy0: torch.Tensor, xy1: torch.Tensor,
+               config: BlobConfig | dict | None = None) -> Matches:
+    """Blob matching of two descriptor sets.
+
+    Args:
+        desc0: (N, D), desc1: (M, D) descriptors (CPU or CUDA, same device).
+        xy0: (N, 2), xy1: (M, 2) keypoint positions in pixels.
+        config: BlobConfig, a dict of its fields, or None for the defaults.
+
+    Returns:
+        Many-to-many Matches sorted by ascending context-ratio score 2v / (v_r + v_c).
+    """
+    cfg = BlobConfig.from_dict(config) if isinstance(config, dict) else (config or BlobConfig())
+    n, m = desc0.shape[0], desc1.shape[0]
+    if n == 0 or m == 0:
+        return Matches.empty()
+    dev = desc0.device
+    xy0 = torch.as_tensor(xy0, device=dev).float()
+    xy1 = torch.as_tensor(xy1, device=dev).float()
+    row_dist, row_idx, col_dist, col_idx = knn(desc0, desc1, cfg.shortlist_k, cfg.shortlist_k, cfg.block_size)
+
+    # Shortlist: row top-k pairs whose row is also in the column's top-k (exact index membership).
+    kr = row_idx.shape[1]
+    r_i = torch.arange(n, device=dev).repeat_interleave(kr)
+    r_j = row_idx.flatten()
+    in_both = (col_idx[r_j] == r_i[:, None]).any(1)
+    i, j, v = r_i[in_both], r_j[in_both], row_dist.flatten()[in_both]
+
+    ok = greedy_many_to_many(i.cpu().numpy(), j.cpu().numpy(), v.cpu().numpy(), cfg.max_per_keypoint)
+    ok_t = torch.from_numpy(ok).to(dev)
+    i, j, v = i[ok_t], j[ok_t], v[ok_t]
+
+    v_r = nearest_far(desc0[i], desc1, xy1, xy1[j], cfg.context_radius, row_dist[i], row_idx[i], cfg.block_size)
+    v_c = nearest_far(desc1[j], desc0, xy0, xy0[i], cfg.context_radius, col_dist[j], col_idx[j], cfg.block_size)
+    v_r = torch.where(torch.isinf(v_r), v, v_r)
+    v_c = torch.where(torch.isinf(v_c), v, v_c)
+    denom = v_r + v_c
+    tied = torch.where(v > 0, torch.full_like(v, float("inf")), torch.ones_like(v))  # 0 / 0 is ambiguous
+    score = torch.where(denom > 0, 2 * v / denom.clamp_min(torch.finfo(v.dtype).tiny), tied)
+    s = score.double().cpu().numpy()
+    order = np.argsort(s, kind="stable")
+    return Matches(i.cpu().numpy()[order], j.cpu().numpy()[order], s[order])

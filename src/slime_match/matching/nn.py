@@ -1,0 +1,189 @@
+"""Nearest-neighbour descriptor matching: NN ratio, mutual NN and FGINN, on blocked L2 distances.
+
+The N x M distance matrix is never held in memory: rows are processed in blocks of ``block_size`` and
+only the k smallest distances per row and per column are kept. The same primitives serve Blob matching.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from ..errors import ConfigError
+from ..types import Matches
+
+DEFAULT_BLOCK = 1024
+
+
+def _sq_dist_block(a: torch.Tensor, b: torch.Tensor, b_sq: torch.Tensor) -> torch.Tensor:
+    """(B, M) squared L2 distances of a (B, D) block to b (M, D); may be slightly negative (rounding)."""
+    return torch.addmm(b_sq[None, :], a, b.T, alpha=-2.0).add_((a * a).sum(1, keepdim=True))
+
+
+def knn(desc0: torch.Tensor, desc1: torch.Tensor, k_rows: int, k_cols: int = 0,
+        block_size: int = DEFAULT_BLOCK) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """k nearest neighbours along the rows and the columns of the L2 distance matrix, in row blocks.
+
+    Args:
+        desc0: (N, D) descriptors of image 0 (rows).
+        desc1: (M, D) descriptors of image 1 (columns), same device.
+        k_rows: neighbours kept per row (clipped to M).
+        k_cols: neighbours kept per column (clipped to N); 0 skips the column search.
+        block_size: rows per block; peak extra memory is about 2 * block_size * M floats.
+
+    Returns:
+        row_dist (N, kr), row_idx (N, kr): ascending distances from each row to its nearest columns;
+        col_dist (M, kc), col_idx (M, kc): ascending distances from each column to its nearest rows.
+    """
+    if block_size < 1:
+        raise ConfigError(f"block_size must be >= 1, got {block_size}")
+    a = desc0.float()
+    b = desc1.float()
+    n, m = a.shape[0], b.shape[0]
+    kr, kc = min(k_rows, m), min(k_cols, n)
+    dev = a.device
+    row_dist = torch.empty(n, kr, device=dev)
+    row_idx = torch.empty(n, kr, dtype=torch.long, device=dev)
+    col_vals, col_inds = [], []
+    b_sq = (b * b).sum(1)
+    for start in range(0, n, block_size):
+        d = _sq_dist_block(a[start:start + block_size], b, b_sq)
+        if kr > 0:
+            val, idx = torch.topk(d, kr, dim=1, largest=False, sorted=True)
+            row_dist[start:start + d.shape[0]] = val
+            row_idx[start:start + d.shape[0]] = idx
+        if kc > 0:
+            val, idx = torch.topk(d, min(kc, d.shape[0]), dim=0, largest=False, sorted=False)
+            col_vals.append(val)
+            col_inds.append(idx + start)
+    if kc > 0:
+        col_dist, pick = torch.topk(torch.cat(col_vals), kc, dim=0, largest=False, sorted=True)
+        col_idx = torch.gather(torch.cat(col_inds), 0, pick).T.contiguous()
+        col_dist = col_dist.T.clamp_min(0.0).sqrt().contiguous()
+    else:
+        col_dist = torch.empty(m, 0, device=dev)
+        col_idx = torch.empty(m, 0, dtype=torch.long, device=dev)
+    return row_dist.clamp_min_(0.0).sqrt_(), row_idx, col_dist, col_idx
+
+
+def nearest_far(query: torch.Tensor, desc: torch.Tensor, xy: torch.Tensor, anchor: torch.Tensor,
+                radius: float, nn_dist: torch.Tensor, nn_idx: torch.Tensor,
+                block_size: int = DEFAULT_BLOCK) -> torch.Tensor:
+    """Distance from each query descriptor to its nearest descriptor located farther than radius from an anchor.
+
+    The sorted k-NN lists answer most queries exactly (the first far entry is the global answer); queries
+    whose k nearest are all near the anchor are recomputed against every descriptor, in blocks.
+
+    Args:
+        query: (P, D) query descriptors.
+        desc: (M, D) descriptors searched; xy: (M, 2) their keypoint positions in pixels.
+        anchor: (P, 2) position around which competitors are ignored; radius: in pixels.
+        nn_dist, nn_idx: (P, k) ascending distances / indices of each query's k nearest in ``desc``.
+        block_size: queries per block of the exact fallback.
+
+    Returns:
+        (P,) float32 distances; inf where every descriptor is within radius of the anchor.
+    """
+    p = query.shape[0]
+    out = torch.full((p,), float("inf"), device=query.device)
+    if p == 0 or desc.shape[0] == 0:
+        return out
+    far = ((xy[nn_idx] - anchor[:, None, :]).square().sum(-1) > radius * radius)
+    has_far = far.any(1)
+    first = far.float().argmax(1)
+    out[has_far] = nn_dist[has_far, first[has_far]]
+    k = nn_idx.shape[1]
+    rest = torch.nonzero(~has_far).flatten()
+    if rest.numel() and k < desc.shape[0]:
+        b = desc.float()
+        b_sq = (b * b).sum(1)
+        for start in range(0, rest.numel(), block_size):
+            sel = rest[start:start + block_size]
+            d = _sq_dist_block(query[sel].float(), b, b_sq)
+            near = (xy[None, :, :] - anchor[sel][:, None, :]).square().sum(-1) <= radius * radius
+            out[sel] = d.masked_fill_(near, float("inf")).amin(1).clamp_min(0.0).sqrt()
+    return out
+
+
+def _to_matches(idx0: torch.Tensor, idx1: torch.Tensor, scores: torch.Tensor) -> Matches:
+    """Matches sorted by ascending score (stable), as numpy."""
+    s = scores.detach().double().cpu().numpy()
+    order = np.argsort(s, kind="stable")
+    return Matches(idx0.cpu().numpy()[order], idx1.cpu().numpy()[order], s[order])
+
+
+def match_nn_ratio(desc0: torch.Tensor, desc1: torch.Tensor, ratio: float = 0.8,
+                   block_size: int = DEFAULT_BLOCK) -> Matches:
+    """Lowe's nearest-neighbour ratio test.
+
+    Args:
+        desc0: (N, D), desc1: (M, D) descriptors.
+        ratio: keep i -> nn(i) when d1 / d2 < ratio (d2 = inf when M < 2).
+
+    Returns:
+        Matches with score d1 / d2, ascending.
+    """
+    if not 0 < ratio <= 1:
+        raise ConfigError(f"ratio must be in (0, 1], got {ratio}")
+    if desc0.shape[0] == 0 or desc1.shape[0] == 0:
+        return Matches.empty()
+    dist, idx, _, _ = knn(desc0, desc1, 2, 0, block_size)
+    second = dist[:, 1] if dist.shape[1] > 1 else torch.full_like(dist[:, 0], float("inf"))
+    score = _ratio(dist[:, 0], second)
+    keep = torch.nonzero(score < ratio).flatten()
+    return _to_matches(keep, idx[keep, 0], score[keep])
+
+
+def match_mutual_nn(desc0: torch.Tensor, desc1: torch.Tensor, block_size: int = DEFAULT_BLOCK) -> Matches:
+    """Mutual nearest neighbours: i -> j and j -> i.
+
+    Returns:
+        Matches with score = L2 descriptor distance, ascending.
+    """
+    if desc0.shape[0] == 0 or desc1.shape[0] == 0:
+        return Matches.empty()
+    dist, idx, _, col_idx = knn(desc0, desc1, 1, 1, block_size)
+    rows = torch.arange(desc0.shape[0], device=idx.device)
+    keep = torch.nonzero(col_idx[idx[:, 0], 0] == rows).flatten()
+    return _to_matches(keep, idx[keep, 0], dist[keep, 0])
+
+
+def match_fginn(desc0: torch.Tensor, desc1: torch.Tensor, xy0: torch.Tensor, xy1: torch.Tensor,
+                ratio: float = 0.8, spatial_radius: float = 10.0, mutual: bool = False, k: int = 10,
+                block_size: int = DEFAULT_BLOCK) -> Matches:
+    """First Geometrically Inconsistent Nearest Neighbour ratio (Mishkin et al.).
+
+    The second neighbour of the ratio is the nearest descriptor whose keypoint lies farther than
+    ``spatial_radius`` from the first neighbour's keypoint, so near-duplicate detections at the same place
+    do not veto a distinctive match.
+
+    Args:
+        desc0: (N, D), desc1: (M, D) descriptors; xy0: (N, 2), xy1: (M, 2) keypoint positions in pixels
+            (only image 1's positions matter; xy0 keeps the signature symmetric).
+        ratio: keep when d1 / d_fginn < ratio.
+        spatial_radius: radius in pixels around the first neighbour inside which competitors are ignored.
+        mutual: also require i to be the nearest neighbour of its match nn(i).
+        k: neighbours listed per row before the exact fallback search.
+
+    Returns:
+        Matches with score d1 / d_fginn, ascending.
+    """
+    if not 0 < ratio <= 1:
+        raise ConfigError(f"ratio must be in (0, 1], got {ratio}")
+    if desc0.shape[0] == 0 or desc1.shape[0] == 0:
+        return Matches.empty()
+    xy1 = torch.as_tensor(xy1, device=desc1.device).float()
+    dist, idx, _, col_idx = knn(desc0, desc1, k, 1 if mutual else 0, block_size)
+    second = nearest_far(desc0, desc1, xy1, xy1[idx[:, 0]], spatial_radius, dist, idx, block_size)
+    score = _ratio(dist[:, 0], second)
+    ok = score < ratio
+    if mutual:
+        ok &= col_idx[idx[:, 0], 0] == torch.arange(desc0.shape[0], device=idx.device)
+    keep = torch.nonzero(ok).flatten()
+    return _to_matches(keep, idx[keep, 0], score[keep])
+
+
+def _ratio(first: torch.Tensor, second: torch.Tensor) -> torch.Tensor:
+    """first / second with 0 / 0 = 1 (ambiguous) and x / inf = 0."""
+    out = first / second
+    return torch.where((first == 0) & (second == 0), torch.ones_like(out), out)
