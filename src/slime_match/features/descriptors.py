@@ -1,0 +1,104 @@
+"""Patch descriptors: HardNet, TFeat (learned, kornia weights) and RootSIFT (weight-free), all L2-normalised."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+from kornia.feature import SIFTDescriptor
+
+from slime_match.errors import ConfigError, WeightsNotFoundError
+from slime_match.features.laf import PatchPyramid
+from slime_match.features.weights import is_cached, load_state_dict, load_model
+
+DESCRIPTOR_METHODS = ("hardnet", "tfeat", "rootsift")
+
+
+@dataclass
+class DescriptorConfig:
+    """Descriptor options.
+
+    Attributes:
+        patch_size: side of the patches (pixels); the networks need 32.
+        magnification: patch half-width in units of the LAF.
+        batch_size: patches per network batch.
+    """
+
+    patch_size: int = 32
+    magnification: float = 1.0
+    batch_size: int = 2048
+
+
+def resolve_descriptor(name: str, weights_dir: str | Path | None = None) -> tuple[str, str | None]:
+    """Concrete descriptor for a name; "auto" is HardNet when its weights are cached or downloadable.
+
+    Args:
+        name: "auto" or one of :data:`DESCRIPTOR_METHODS`.
+        weights_dir: see :func:`slime_match.features.weights.checkpoint_dir`.
+
+    Returns:
+        (descriptor name, warning text for the caller to record, or None).
+    """
+    if name != "auto":
+        if name not in DESCRIPTOR_METHODS:
+            raise ConfigError(f"unknown descriptor {name!r}; choose auto or one of {', '.join(DESCRIPTOR_METHODS)}")
+        return name, None
+    if is_cached("hardnet", weights_dir):
+        return "hardnet", None
+    try:
+        load_state_dict("hardnet", weights_dir)  # downloads into the cache
+    except WeightsNotFoundError as exc:
+        return "rootsift", f"descriptor 'auto': HardNet unavailable, using RootSIFT instead. {exc}"
+    return "hardnet", None
+
+
+class Descriptor:
+    """Describe LAF patches.
+
+    Args:
+        method: "hardnet", "tfeat" or "rootsift".
+        device: torch device of the network.
+        weights_dir: see :func:`slime_match.features.weights.checkpoint_dir`.
+        config: options; defaults of :class:`DescriptorConfig`.
+    """
+
+    def __init__(
+        self,
+        method: str = "hardnet",
+        device: str | torch.device = "cpu",
+        weights_dir: str | Path | None = None,
+        config: DescriptorConfig | None = None,
+    ) -> None:
+        if method not in DESCRIPTOR_METHODS:
+            raise ConfigError(f"unknown descriptor {method!r}; choose one of {', '.join(DESCRIPTOR_METHODS)}")
+        self.method = method
+        self.config = config or DescriptorConfig()
+        if method == "rootsift":
+            self.net = SIFTDescriptor(self.config.patch_size, rootsift=True).to(device)
+        else:
+            self.net = load_model(method, weights_dir, device)
+
+    @property
+    def dim(self) -> int:
+        """Descriptor length (128 for all three)."""
+        return 128
+
+    @torch.inference_mode()
+    def describe_patches(self, patches: torch.Tensor) -> torch.Tensor:
+        """(N, D) L2-normalised descriptors of patches (N, 1, P, P)."""
+        return F.normalize(self.net(patches).reshape(patches.shape[0], -1), dim=1)
+
+    @torch.inference_mode()
+    def __call__(self, pyramid: PatchPyramid, laf: torch.Tensor) -> torch.Tensor:
+        """(N, D) descriptors of the patches of LAFs (N, 2, 3) in pixels."""
+        cfg = self.config
+        if laf.shape[0] == 0:
+            return torch.zeros(0, self.dim, device=pyramid.device)
+        return torch.cat(
+            [
+                self.describe_patches(pyramid.extract(part, cfg.patch_size, cfg.magnification))
+                for part in laf.split(cfg.batch_size)
+            ]
+        )

@@ -1,0 +1,139 @@
+"""Find and load the kornia network weights (AffNet, OriNet, HardNet, TFeat).
+
+Weights live in kornia's torch-hub cache, ``<TORCH_HOME>/hub/checkpoints`` (``torch.hub.get_dir()``), or in
+an explicit ``weights_dir`` (a torch-home-like folder with ``hub/checkpoints``, or the checkpoint folder
+itself). Loading goes through kornia's own downloader with kornia's URLs, so a missing file is fetched
+into that folder when the network allows it (e.g. HardNet's ``checkpoint_liberty_with_aug.pth``); when it
+does not, :class:`~slime_match.errors.WeightsNotFoundError` names the weight-free alternatives. There is
+no silent fallback.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+from torch import nn
+
+from slime_match.errors import ConfigError, WeightsNotFoundError
+
+logger = logging.getLogger("slime_match")
+
+
+@dataclass(frozen=True)
+class _Spec:
+    """Where a model's weights come from and how kornia loads them."""
+
+    module: str  # kornia module holding the ``urls`` dict and the class
+    url_key: str
+    cls: str
+    file: str  # cache file name (basename of kornia's first URL)
+    state_key: str | None  # checkpoint entry holding the state dict (None: the checkpoint is the state dict)
+    strict: bool
+    alternatives: str
+
+
+SPECS: dict[str, _Spec] = {
+    "hardnet": _Spec(
+        "kornia.feature.hardnet", "liberty_aug", "HardNet", "checkpoint_liberty_with_aug.pth", "state_dict", True,
+        "--descriptor tfeat or rootsift",
+    ),
+    "tfeat": _Spec(
+        "kornia.feature.tfeat", "liberty", "TFeat", "tfeat-liberty.params", None, True,
+        "--descriptor rootsift (or hardnet)",
+    ),
+    "affnet": _Spec(
+        "kornia.feature.affine_shape", "affnet", "LAFAffNetShapeEstimator", "AffNet.pth", "state_dict", False,
+        "--shape baumberg",
+    ),
+    "orinet": _Spec(
+        "kornia.feature.orientation", "orinet", "OriNet", "OriNet.pth", "state_dict", False,
+        "--orientation gradient|upright",
+    ),
+}
+
+
+def _spec(name: str) -> _Spec:
+    if name not in SPECS:
+        raise ConfigError(f"unknown weights {name!r}; known: {', '.join(SPECS)}")
+    return SPECS[name]
+
+
+def checkpoint_dir(weights_dir: str | Path | None = None) -> Path:
+    """Folder holding the checkpoint files.
+
+    Args:
+        weights_dir: a torch-home-like folder (``hub/checkpoints`` inside) or a checkpoint folder;
+            None for kornia's cache, ``torch.hub.get_dir()/checkpoints`` (follows ``TORCH_HOME``).
+
+    Returns:
+        The checkpoint folder (may not exist yet).
+    """
+    if weights_dir is None:
+        return Path(torch.hub.get_dir()) / "checkpoints"
+    root = Path(weights_dir).expanduser()
+    for sub in (root / "hub" / "checkpoints", root / "checkpoints"):
+        if sub.is_dir():
+            return sub
+    return root
+
+
+def weights_path(name: str, weights_dir: str | Path | None = None) -> Path:
+    """Path where the checkpoint of model ``name`` is (or would be) cached."""
+    return checkpoint_dir(weights_dir) / _spec(name).file
+
+
+def is_cached(name: str, weights_dir: str | Path | None = None) -> bool:
+    """Whether the checkpoint of model ``name`` is on disk (no network access)."""
+    return weights_path(name, weights_dir).is_file()
+
+
+def load_state_dict(name: str, weights_dir: str | Path | None = None) -> dict:
+    """Checkpoint of model ``name`` through kornia's downloader (cache hit, else download).
+
+    Args:
+        name: "hardnet", "tfeat", "affnet" or "orinet".
+        weights_dir: see :func:`checkpoint_dir`.
+
+    Returns:
+        The loaded checkpoint (CPU tensors).
+
+    Raises:
+        WeightsNotFoundError: not cached and not downloadable; the message names the alternatives.
+    """
+    spec = _spec(name)
+    folder = checkpoint_dir(weights_dir)
+    download = importlib.import_module("kornia.core.download")
+    urls = importlib.import_module(spec.module).urls[spec.url_key]
+    if not (folder / spec.file).is_file():
+        logger.info("%s weights not in %s: trying to download them", name, folder)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return download.load_state_dict_from_url(
+                urls, model_dir=str(folder), file_name=spec.file, map_location=torch.device("cpu")
+            )
+    except Exception as exc:  # noqa: BLE001 - any failure of the download/load is reported the same way
+        raise WeightsNotFoundError(
+            f"{name} weights '{spec.file}' are not in {folder} and could not be downloaded "
+            f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}). Put the file there "
+            f"(or set TORCH_HOME / weights_dir), or use a weight-free alternative: {spec.alternatives}"
+        ) from exc
+
+
+def load_model(name: str, weights_dir: str | Path | None = None, device: str | torch.device = "cpu") -> nn.Module:
+    """Kornia model ``name`` with its pretrained weights, in eval mode on ``device``.
+
+    Raises:
+        WeightsNotFoundError: see :func:`load_state_dict`.
+    """
+    spec = _spec(name)
+    checkpoint = load_state_dict(name, weights_dir)
+    model = getattr(importlib.import_module(spec.module), spec.cls)(pretrained=False)
+    state = checkpoint[spec.state_key] if spec.state_key is not None else checkpoint
+    model.load_state_dict(state, strict=spec.strict)
+    return model.eval().to(device)
