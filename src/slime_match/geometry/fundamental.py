@@ -71,12 +71,16 @@ def epipolar_distance_batch(f: np.ndarray, x0: np.ndarray, x1: np.ndarray) -> np
     Returns:
         (B, K) ``max(d(x1, F x0), d(x0, F^T x1))`` in pixels (inf for undefined lines).
     """
-    l1 = np.einsum("bij,...kj->bki", f[:, :, :2], x0) + f[:, None, :, 2]  # lines in image 1
-    l0 = np.einsum("bji,...kj->bki", f[:, :2, :], x1) + f[:, None, 2, :]  # lines in image 0
-    alg = np.abs(np.einsum("...kj,bkj->bk", x1, l1[..., :2]) + l1[..., 2])
+    x0 = np.broadcast_to(x0, (f.shape[0],) + x0.shape[-2:])
+    x1 = np.broadcast_to(x1, (f.shape[0],) + x1.shape[-2:])
+    ff = f[:, :, :, None]
+    u0, v0, u1, v1 = x0[:, None, :, 0], x0[:, None, :, 1], x1[:, None, :, 0], x1[:, None, :, 1]
+    l1 = ff[:, :, 0] * u0 + ff[:, :, 1] * v0 + ff[:, :, 2]  # (B, 3, K) epipolar lines in image 1
+    l0 = ff[:, 0] * u1 + ff[:, 1] * v1 + ff[:, 2]  # (B, 3, K) epipolar lines in image 0
+    alg = np.abs(l1[:, 0] * u1[:, 0] + l1[:, 1] * v1[:, 0] + l1[:, 2])
     with np.errstate(divide="ignore", invalid="ignore"):
-        d1 = alg / np.hypot(l1[..., 0], l1[..., 1])
-        d0 = alg / np.hypot(l0[..., 0], l0[..., 1])
+        d1 = alg / np.hypot(l1[:, 0], l1[:, 1])
+        d0 = alg / np.hypot(l0[:, 0], l0[:, 1])
     d = np.maximum(d0, d1)
     d[~np.isfinite(d)] = np.inf
     return d
@@ -129,7 +133,8 @@ def fundamental_from_homography_and_parallax_batch(
         (a point on the plane, or both points on the same epipolar line).
     """
     p0, p1 = _homogeneous(np.asarray(x0, dtype=np.float64)), _homogeneous(np.asarray(x1, dtype=np.float64))
-    hx = np.einsum("...ij,bkj->bki", h, p0)
+    h = np.broadcast_to(h, (p0.shape[0], 3, 3))
+    hx = np.einsum("bij,bkj->bki", h, p0)
     hx = hx / np.maximum(np.linalg.norm(hx, axis=-1, keepdims=True), _EPS)
     p1 = p1 / np.linalg.norm(p1, axis=-1, keepdims=True)
     lines = np.cross(hx, p1)  # (B, 2, 3)
