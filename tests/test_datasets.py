@@ -172,8 +172,14 @@ def test_rotated_pair_satisfies_gt(angle):
     H = np.array([[1.0, 0.02, 7.0], [-0.01, 1.0, 4.0], [0.0, 0.0, 1.0]])
     x0 = np.array([[40.0, 30.0]])
     target = project(H, x0)[0][0]
-    pair = D.Pair("blob", _blob_image(x0[0]), _blob_image(target), "homography", H=H,
-                  corrs=np.concatenate([x0, [target]], 1))
+    pair = D.Pair(
+        "blob",
+        _blob_image(x0[0]),
+        _blob_image(target),
+        "homography",
+        H=H,
+        corrs=np.concatenate([x0, [target]], 1),
+    )
     rp = D.rotated_pair(pair, angle)
     moved = project(rp.H, x0)[0][0]
     exact = angle % 90 == 0
@@ -193,8 +199,17 @@ def test_rotated_pose_pair_updates_camera(angle):
     K0 = np.array([[300.0, 0, 60], [0, 310, 45], [0, 0, 1]])
     K1 = np.array([[280.0, 0, 58], [0, 290, 44], [0, 0, 1]])
     R, t = _rot([0.2, 1, 0], 10), np.array([0.5, 0.1, 0.0])
-    pair = D.Pair("p", _texture(90, 120), _texture(90, 120, 1), "pose", F=D.fundamental_from_pose(K0, K1, R, t),
-                  K0=K0, K1=K1, R=R, t=t)
+    pair = D.Pair(
+        "p",
+        _texture(90, 120),
+        _texture(90, 120, 1),
+        "pose",
+        F=D.fundamental_from_pose(K0, K1, R, t),
+        K0=K0,
+        K1=K1,
+        R=R,
+        t=t,
+    )
     rp = D.rotated_pair(pair, angle)
     assert np.allclose(np.tril(rp.K1, -1), 0) and (np.diag(rp.K1) > 0).all()
     assert _same_up_to_scale(rp.F, D.fundamental_from_pose(K0, rp.K1, rp.R, rp.t)) < 1e-9

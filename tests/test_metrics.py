@@ -1,5 +1,6 @@
 """Metrics on synthetic cases with hand-computed answers."""
 
+import itertools
 import math
 
 import cv2
@@ -84,9 +85,14 @@ def test_valid_area_homography():
 
 
 def test_valid_area_nonplanar_union():
-    v0, v1 = M.valid_area_nonplanar([np.array([[50.0, 50.0]]), np.array([[150.0, 50.0]])],
-                                    [np.zeros((0, 2)), np.zeros((0, 2))], (100, 200), (100, 200),
-                                    gt_corrs=np.array([[0.0, 0.0, 100.0, 50.0]]), t=10)
+    v0, v1 = M.valid_area_nonplanar(
+        [np.array([[50.0, 50.0]]), np.array([[150.0, 50.0]])],
+        [np.zeros((0, 2)), np.zeros((0, 2))],
+        (100, 200),
+        (100, 200),
+        gt_corrs=np.array([[0.0, 0.0, 100.0, 50.0]]),
+        t=10,
+    )
     assert v0[50, 50] and v0[50, 150] and v0[0, 0] and not v0[50, 100]
     assert v1[50, 100] and v1.sum() == M.dilated_mask(np.array([[100.0, 50.0]]), (100, 200), 10).sum()
 
@@ -126,7 +132,7 @@ def test_fundamental_accuracy_zero_and_growing():
         Rp = _rot([0.3, 0.2, 1.0], deg) @ R
         Fp = np.linalg.inv(K).T @ tx @ Rp @ np.linalg.inv(K)
         errs.append(M.fundamental_accuracy_error(Fp, F, valid, valid))
-    assert all(0 < a < b for a, b in zip(errs, errs[1:]))
+    assert all(0 < a < b for a, b in itertools.pairwise(errs))
     assert M.fundamental_accuracy_error(None, F, valid, valid) == math.inf
 
 
@@ -146,7 +152,9 @@ def test_epipolar_line_area_parallel_and_crossing():
 
 def test_failure_counts():
     assert M.failure_counts(np.array([0, 10, 5, 0, 3]), np.array([0, 0, 5, 0, 1])) == {
-        "no_matches": 2, "only_wrong": 1}
+        "no_matches": 2,
+        "only_wrong": 1,
+    }
 
 
 def test_relative_pose_error_known_rotations():

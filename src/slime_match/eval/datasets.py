@@ -145,8 +145,9 @@ def _require_dir(path: Path | str, what: str) -> Path:
 # resizing protocol
 
 
-def working_size(width: int, height: int, max_side: int | None = None,
-                 size: tuple[int, int] | None = None) -> tuple[int, int]:
+def working_size(
+    width: int, height: int, max_side: int | None = None, size: tuple[int, int] | None = None
+) -> tuple[int, int]:
     """(w, h) an image of ``width x height`` px is resized to by the protocol (fixed size wins; a fixed
     landscape ``size`` is transposed for portrait images)."""
     if size is not None:
@@ -158,8 +159,9 @@ def working_size(width: int, height: int, max_side: int | None = None,
     return int(width), int(height)
 
 
-def protocol_resize(image: np.ndarray, max_side: int | None = None,
-                    size: tuple[int, int] | None = None) -> tuple[np.ndarray, tuple[float, float]]:
+def protocol_resize(
+    image: np.ndarray, max_side: int | None = None, size: tuple[int, int] | None = None
+) -> tuple[np.ndarray, tuple[float, float]]:
     """Resize an (H, W[, C]) image by the protocol; returns it and the (sx, sy) factors original/resized."""
     h, w = image.shape[:2]
     nw, nh = working_size(w, h, max_side, size)
@@ -231,8 +233,9 @@ def _rotate_mask(mask: np.ndarray, angle_deg: float) -> np.ndarray:
     return out != 1
 
 
-def _warp_camera(K: np.ndarray, R: np.ndarray, t: np.ndarray,
-                 A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _warp_camera(
+    K: np.ndarray, R: np.ndarray, t: np.ndarray, A: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """New (K, R, t) of a camera whose pixels are mapped by the in-plane affine A (RQ decomposition)."""
     Kn, Q = scipy.linalg.rq(A @ K)
     D = np.diag(np.sign(np.diag(Kn)))
@@ -265,7 +268,7 @@ def transform_view(pair: Pair, which: int, image: np.ndarray, A: np.ndarray) -> 
             R = R @ Q.T
     F = None if F is None else F / np.linalg.norm(F)
     H = None if H is None else H / H[2, 2]
-    fields = dict(H=H, F=F, K0=K0, K1=K1, R=R, t=t, corrs=corrs)
+    fields = {"H": H, "F": F, "K0": K0, "K1": K1, "R": R, "t": t, "corrs": corrs}
     return replace(pair, **{("image1" if which == 1 else "image0"): image}, **fields)
 
 
@@ -303,7 +306,7 @@ def read_planar(folder: Path | str) -> list[Pair]:
         if m is None:
             continue
         scene, k = m["scene"], m["k"]
-        base = scene[:-3] if scene.endswith("rot") else scene
+        base = scene.removesuffix("rot")
         im0 = _find_image(folder, f"{scene}1") or _find_image(folder, f"{base}1")
         im1 = _find_image(folder, f"{scene}{k}")
         if im0 is None or im1 is None:
@@ -312,8 +315,9 @@ def read_planar(folder: Path | str) -> list[Pair]:
         if mask0 is None:
             mask0 = _read_mask(folder / f"mask_{base}1.png")
         mask1 = _read_mask(folder / f"mask_{scene}{k}.png")
-        pairs.append(Pair(f"{scene}/1-{k}", im0, im1, "homography", H=_read_matrix(hfile),
-                          mask0=mask0, mask1=mask1))
+        pairs.append(
+            Pair(f"{scene}/1-{k}", im0, im1, "homography", H=_read_matrix(hfile), mask0=mask0, mask1=mask1)
+        )
     if not pairs:
         raise FileNotFoundError(f"no '<scene>_H1<k>.txt' homography files in {folder}")
     return pairs
@@ -334,8 +338,11 @@ def _read_hpatches_sequence(folder: Path) -> list[Pair]:
 def read_hpatches(folder: Path | str) -> list[Pair]:
     """HPatches: one sequence folder (``1..6.ppm`` + ``H_1_k``) or a root of ``v_*`` / ``i_*`` folders."""
     folder = _require_dir(folder, "HPatches")
-    seqs = [folder] if any(folder.glob("H_1_*")) else sorted(
-        p for p in folder.iterdir() if p.is_dir() and p.name[:2] in ("v_", "i_"))
+    seqs = (
+        [folder]
+        if any(folder.glob("H_1_*"))
+        else sorted(p for p in folder.iterdir() if p.is_dir() and p.name[:2] in ("v_", "i_"))
+    )
     pairs = [p for s in seqs for p in _read_hpatches_sequence(s)]
     if not pairs:
         raise FileNotFoundError(f"no HPatches sequences (folders v_*/i_* with H_1_k files) in {folder}")
@@ -417,8 +424,18 @@ def read_scannet_pairs(pairs_file: Path | str, images_dir: Path | str | None = N
         v = np.asarray(f[4:], np.float64)
         K0, K1, T = v[:9].reshape(3, 3), v[9:18].reshape(3, 3), v[18:].reshape(4, 4)
         R, t = T[:3, :3], T[:3, 3]
-        pair = Pair(f"{Path(f[0]).stem}-{Path(f[1]).stem}", images_dir / f[0], images_dir / f[1], "pose",
-                    F=fundamental_from_pose(K0, K1, R, t), K0=K0, K1=K1, R=R, t=t, size=SCANNET_SIZE)
+        pair = Pair(
+            f"{Path(f[0]).stem}-{Path(f[1]).stem}",
+            images_dir / f[0],
+            images_dir / f[1],
+            "pose",
+            F=fundamental_from_pose(K0, K1, R, t),
+            K0=K0,
+            K1=K1,
+            R=R,
+            t=t,
+            size=SCANNET_SIZE,
+        )
         for which, rot in ((0, int(f[2])), (1, int(f[3]))):
             if rot % 4:
                 img, A = rotate_image(_read_image(pair.image1 if which else pair.image0), 90 * rot)
@@ -443,10 +460,20 @@ def read_megadepth1500(images_root: Path | str, gt_dir: Path | str) -> list[Pair
             T = poses[j] @ np.linalg.inv(poses[i])
             K0, K1 = np.asarray(Ks[i], np.float64), np.asarray(Ks[j], np.float64)
             R, t = T[:3, :3], T[:3, 3]
-            pairs.append(Pair(f"{scene}/{Path(paths[i]).stem}-{Path(paths[j]).stem}",
-                              images_root / paths[i], images_root / paths[j], "pose",
-                              F=fundamental_from_pose(K0, K1, R, t), K0=K0, K1=K1, R=R, t=t,
-                              max_side=MEGADEPTH_MAX_SIDE))
+            pairs.append(
+                Pair(
+                    f"{scene}/{Path(paths[i]).stem}-{Path(paths[j]).stem}",
+                    images_root / paths[i],
+                    images_root / paths[j],
+                    "pose",
+                    F=fundamental_from_pose(K0, K1, R, t),
+                    K0=K0,
+                    K1=K1,
+                    R=R,
+                    t=t,
+                    max_side=MEGADEPTH_MAX_SIDE,
+                )
+            )
     if not pairs:
         raise FileNotFoundError(f"no MegaDepth-1500 scene files in {gt_dir}")
     return pairs
@@ -460,14 +487,26 @@ def read_scannet1500(images_root: Path | str, gt_dir: Path | str) -> list[Pair]:
     gt_dir = _require_dir(gt_dir, "ScanNet-1500 ground truth")
     d, intr = np.load(gt_dir / "test.npz"), np.load(gt_dir / "intrinsics.npz")
     pairs = []
-    for (sc, sub, s0, s1), rel in zip(d["name"].astype(int), d["rel_pose"].reshape(-1, 3, 4).astype(np.float64)):
+    for (sc, sub, s0, s1), rel in zip(
+        d["name"].astype(int), d["rel_pose"].reshape(-1, 3, 4).astype(np.float64)
+    ):
         scene = f"scene{sc:04d}_{sub:02d}"
         K = np.asarray(intr[scene], np.float64)
         R, t = rel[:, :3], rel[:, 3]
-        pairs.append(Pair(f"{scene}/{s0}-{s1}", images_root / scene / "color" / f"{s0}.jpg",
-                          images_root / scene / "color" / f"{s1}.jpg", "pose",
-                          F=fundamental_from_pose(K, K, R, t), K0=K, K1=K.copy(), R=R, t=t,
-                          size=SCANNET_SIZE))
+        pairs.append(
+            Pair(
+                f"{scene}/{s0}-{s1}",
+                images_root / scene / "color" / f"{s0}.jpg",
+                images_root / scene / "color" / f"{s1}.jpg",
+                "pose",
+                F=fundamental_from_pose(K, K, R, t),
+                K0=K,
+                K1=K.copy(),
+                R=R,
+                t=t,
+                size=SCANNET_SIZE,
+            )
+        )
     return pairs
 
 
@@ -505,8 +544,13 @@ def load_dataset(spec: str, root: Path | str | None = None) -> list[Pair]:
     """
     name, _, arg = spec.partition(":")
     name = name.strip().lower()
-    readers = {"planar": read_planar, "hpatches": read_hpatches, "oxford": read_oxford, "evd": read_evd,
-               "wxbs": read_wxbs}
+    readers = {
+        "planar": read_planar,
+        "hpatches": read_hpatches,
+        "oxford": read_oxford,
+        "evd": read_evd,
+        "wxbs": read_wxbs,
+    }
     if name in readers and arg:
         return readers[name](arg)
     if name == "motorcycle":
@@ -518,10 +562,14 @@ def load_dataset(spec: str, root: Path | str | None = None) -> list[Pair]:
         if name == "megadepth1500":
             return read_megadepth1500(arg, base / "gt_1500" / "megadepth")
         return read_scannet1500(arg, base / "gt_1500" / "scannet")
-    bundled = {"graf": lambda r: read_oxford(r / "oxford_graf"),
-               "hpatches": lambda r: read_hpatches(r / "hpatches"),
-               "scannet-sample": lambda r: read_scannet_pairs(r / "scannet_sample" / "pairs_with_gt.txt")}
+    bundled = {
+        "graf": lambda r: read_oxford(r / "oxford_graf"),
+        "hpatches": lambda r: read_hpatches(r / "hpatches"),
+        "scannet-sample": lambda r: read_scannet_pairs(r / "scannet_sample" / "pairs_with_gt.txt"),
+    }
     if name in bundled and not arg:
         return bundled[name](Path(root) if root is not None else default_data_root())
     known = sorted(set(readers) | set(bundled) | {"motorcycle", "megadepth1500", "scannet1500"})
-    raise ConfigError(f"unknown dataset spec {spec!r}; known: {', '.join(known)} (folder formats need ':<dir>')")
+    raise ConfigError(
+        f"unknown dataset spec {spec!r}; known: {', '.join(known)} (folder formats need ':<dir>')"
+    )

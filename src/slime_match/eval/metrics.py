@@ -81,8 +81,14 @@ def in_mask(xy: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
     return mask[row, col] | ~inside
 
 
-def correct_matches_homography(x0: np.ndarray, x1: np.ndarray, H_gt: np.ndarray, t: float = DEFAULTS.t_perp,
-                               mask0: np.ndarray | None = None, mask1: np.ndarray | None = None) -> np.ndarray:
+def correct_matches_homography(
+    x0: np.ndarray,
+    x1: np.ndarray,
+    H_gt: np.ndarray,
+    t: float = DEFAULTS.t_perp,
+    mask0: np.ndarray | None = None,
+    mask1: np.ndarray | None = None,
+) -> np.ndarray:
     """Correct matches of a planar pair: two-sided reprojection error ``max(|x1 - Hx0|, |x0 - H^-1 x1|) < t``.
 
     A match whose keypoint lies in an excluded (masked, e.g. out-of-plane) region of either image cannot
@@ -106,8 +112,9 @@ def correct_matches_homography(x0: np.ndarray, x1: np.ndarray, H_gt: np.ndarray,
     return ok & ~in_mask(x0, mask0) & ~in_mask(x1, mask1)
 
 
-def _local_affine_prediction(q: np.ndarray, g_src: np.ndarray, g_dst: np.ndarray, radius: float,
-                             k: int) -> tuple[np.ndarray, np.ndarray]:
+def _local_affine_prediction(
+    q: np.ndarray, g_src: np.ndarray, g_dst: np.ndarray, radius: float, k: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Predict where (K, 2) points ``q`` go from the flow of nearby GT correspondences ``g_src -> g_dst``.
 
     The ``k`` nearest GT correspondences within ``radius`` give a least-squares local affine flow model
@@ -136,9 +143,15 @@ def _local_affine_prediction(q: np.ndarray, g_src: np.ndarray, g_dst: np.ndarray
     return pred, has
 
 
-def correct_matches_fundamental(x0: np.ndarray, x1: np.ndarray, F_gt: np.ndarray, t: float = DEFAULTS.t_perp,
-                                gt_corrs: np.ndarray | None = None, radius: float = DEFAULTS.gt_radius,
-                                neighbours: int = DEFAULTS.gt_neighbours) -> np.ndarray:
+def correct_matches_fundamental(
+    x0: np.ndarray,
+    x1: np.ndarray,
+    F_gt: np.ndarray,
+    t: float = DEFAULTS.t_perp,
+    gt_corrs: np.ndarray | None = None,
+    radius: float = DEFAULTS.gt_radius,
+    neighbours: int = DEFAULTS.gt_neighbours,
+) -> np.ndarray:
     """Correct matches of a non-planar pair.
 
     A match is correct when its maximum epipolar distance w.r.t. ``F_gt`` is below ``t`` and, where GT
@@ -186,8 +199,9 @@ def disparity_error(x0: np.ndarray, x1: np.ndarray, disparity: np.ndarray) -> np
     return np.hypot(x1[:, 0] - (x0[:, 0] - d), x1[:, 1] - x0[:, 1])
 
 
-def correct_matches_disparity(x0: np.ndarray, x1: np.ndarray, disparity: np.ndarray,
-                              t: float = DEFAULTS.t_perp) -> np.ndarray:
+def correct_matches_disparity(
+    x0: np.ndarray, x1: np.ndarray, disparity: np.ndarray, t: float = DEFAULTS.t_perp
+) -> np.ndarray:
     """(K,) bool: ``disparity_error < t``; matches with unknown disparity are False (exclude them from a
     precision by ``np.isfinite(disparity_error(...))``)."""
     with np.errstate(invalid="ignore"):
@@ -210,9 +224,15 @@ def dilated_mask(points: np.ndarray, shape: tuple[int, int], t: float = DEFAULTS
     return cv2.distanceTransform(seeds, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) <= t
 
 
-def coverage(x0_correct: np.ndarray, x1_correct: np.ndarray, shape0: tuple[int, int],
-             shape1: tuple[int, int], valid0: np.ndarray | None = None, valid1: np.ndarray | None = None,
-             t: float = DEFAULTS.t_perp) -> float:
+def coverage(
+    x0_correct: np.ndarray,
+    x1_correct: np.ndarray,
+    shape0: tuple[int, int],
+    shape1: tuple[int, int],
+    valid0: np.ndarray | None = None,
+    valid1: np.ndarray | None = None,
+    t: float = DEFAULTS.t_perp,
+) -> float:
     """Paper coverage: per image, area of the correct keypoints dilated by a disk of radius ``t`` and
     restricted to the valid area, over the valid area; the minimum of the two images.
 
@@ -234,9 +254,13 @@ def coverage(x0_correct: np.ndarray, x1_correct: np.ndarray, shape0: tuple[int, 
     return min(ratios)
 
 
-def valid_area_homography(H_gt: np.ndarray, shape0: tuple[int, int], shape1: tuple[int, int],
-                          mask0: np.ndarray | None = None,
-                          mask1: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def valid_area_homography(
+    H_gt: np.ndarray,
+    shape0: tuple[int, int],
+    shape1: tuple[int, int],
+    mask0: np.ndarray | None = None,
+    mask1: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Valid pixels of a planar pair: those whose GT reprojection lands inside the other image, on the
     visible side of the plane (third homogeneous coordinate with the sign it has at the image centre),
     outside both exclusion masks.
@@ -246,8 +270,10 @@ def valid_area_homography(H_gt: np.ndarray, shape0: tuple[int, int], shape1: tup
     """
     H = np.asarray(H_gt, np.float64)
     out = []
-    for Hm, sa, sb, ma, mb in ((H, shape0, shape1, mask0, mask1),
-                               (np.linalg.inv(H), shape1, shape0, mask1, mask0)):
+    for Hm, sa, sb, ma, mb in (
+        (H, shape0, shape1, mask0, mask1),
+        (np.linalg.inv(H), shape1, shape0, mask1, mask0),
+    ):
         h, w = sa[:2]
         ys, xs = np.mgrid[0:h, 0:w]
         pts = np.stack([xs.ravel(), ys.ravel()], 1).astype(np.float64)
@@ -262,9 +288,14 @@ def valid_area_homography(H_gt: np.ndarray, shape0: tuple[int, int], shape1: tup
     return out[0], out[1]
 
 
-def valid_area_nonplanar(correct0: list[np.ndarray], correct1: list[np.ndarray], shape0: tuple[int, int],
-                         shape1: tuple[int, int], gt_corrs: np.ndarray | None = None,
-                         t: float = DEFAULTS.t_perp) -> tuple[np.ndarray, np.ndarray]:
+def valid_area_nonplanar(
+    correct0: list[np.ndarray],
+    correct1: list[np.ndarray],
+    shape0: tuple[int, int],
+    shape1: tuple[int, int],
+    gt_corrs: np.ndarray | None = None,
+    t: float = DEFAULTS.t_perp,
+) -> tuple[np.ndarray, np.ndarray]:
     """Coverage normaliser of a non-planar pair: dilated union of the correct keypoints of all evaluated
     methods plus the GT correspondences (SM "Coverage").
 
@@ -294,8 +325,9 @@ def _grid_points(valid: np.ndarray, step: int) -> np.ndarray:
     return np.stack([cols * step, rows * step], 1).astype(np.float64)
 
 
-def homography_accuracy_error(H_est: np.ndarray | None, H_gt: np.ndarray, valid0: np.ndarray,
-                              valid1: np.ndarray, step: int = 1) -> float:
+def homography_accuracy_error(
+    H_est: np.ndarray | None, H_gt: np.ndarray, valid0: np.ndarray, valid1: np.ndarray, step: int = 1
+) -> float:
     """Planar accuracy error ``max(E12, E21)`` in px: E12 is the mean ``|H_est x - H_gt x|`` over the valid
     pixels of image 0 (every ``step`` px), E21 the same with the inverses over the valid pixels of image 1.
 
@@ -334,8 +366,8 @@ def _band_area(l_a: np.ndarray, l_b: np.ndarray, width: int, height: int, chunk:
     out = np.empty(len(l_a))
     for s in range(0, len(l_a), chunk):
         ivs = []
-        for ln in (l_a[s:s + chunk], l_b[s:s + chunk]):
-            a, b, c = (ln[:, i:i + 1] for i in range(3))
+        for ln in (l_a[s : s + chunk], l_b[s : s + chunk]):
+            a, b, c = (ln[:, i : i + 1] for i in range(3))
             v = a * xs + c  # (n, W): half-plane is b y > -v
             with np.errstate(divide="ignore", invalid="ignore"):
                 y0 = np.clip(-v / b, y_lo, y_hi)
@@ -346,7 +378,7 @@ def _band_area(l_a: np.ndarray, l_b: np.ndarray, width: int, height: int, chunk:
         (lo1, hi1), (lo2, hi2) = ivs
         inter = np.maximum(np.minimum(hi1, hi2) - np.maximum(lo1, lo2), 0.0)
         disagree = ((hi1 - lo1) + (hi2 - lo2) - 2 * inter).sum(1)
-        out[s:s + chunk] = np.minimum(disagree, width * height - disagree)
+        out[s : s + chunk] = np.minimum(disagree, width * height - disagree)
     return out
 
 
@@ -365,8 +397,13 @@ def epipolar_line_area(l_est: np.ndarray, l_gt: np.ndarray, shape: tuple[int, in
     return area
 
 
-def fundamental_accuracy_error(F_est: np.ndarray | None, F_gt: np.ndarray, valid0: np.ndarray,
-                               valid1: np.ndarray, step: int = DEFAULTS.accuracy_step) -> float:
+def fundamental_accuracy_error(
+    F_est: np.ndarray | None,
+    F_gt: np.ndarray,
+    valid0: np.ndarray,
+    valid1: np.ndarray,
+    step: int = DEFAULTS.accuracy_step,
+) -> float:
     """Non-planar accuracy error ``max(E12, E21)`` in px (paper Sec. "Accuracy", after the no-RANSAC
     fundamental-matrix metric).
 
@@ -406,8 +443,10 @@ def mean_average_accuracy(errors: np.ndarray, max_threshold: int = int(DEFAULTS.
 def failure_counts(n_matches: np.ndarray, n_correct: np.ndarray) -> dict[str, int]:
     """Pairs with no matches at all, and pairs with matches but none correct (per-pair counts (N,))."""
     n_matches, n_correct = np.asarray(n_matches), np.asarray(n_correct)
-    return {"no_matches": int((n_matches == 0).sum()),
-            "only_wrong": int(((n_matches > 0) & (n_correct == 0)).sum())}
+    return {
+        "no_matches": int((n_matches == 0).sum()),
+        "only_wrong": int(((n_matches > 0) & (n_correct == 0)).sum()),
+    }
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -418,8 +457,13 @@ def _angle_deg(cos: float) -> float:
     return math.degrees(math.acos(float(np.clip(cos, -1.0, 1.0))))
 
 
-def relative_pose_error(R_gt: np.ndarray, t_gt: np.ndarray, R: np.ndarray | None, t: np.ndarray | None,
-                        ignore_gt_t_thr: float = 0.0) -> tuple[float, float]:
+def relative_pose_error(
+    R_gt: np.ndarray,
+    t_gt: np.ndarray,
+    R: np.ndarray | None,
+    t: np.ndarray | None,
+    ignore_gt_t_thr: float = 0.0,
+) -> tuple[float, float]:
     """Rotation and translation angular errors in degrees.
 
     The rotation error is the angle of ``R^T R_gt``; the translation error is the angle between ``t`` and
@@ -445,9 +489,14 @@ def _normalise(x: np.ndarray, K: np.ndarray) -> np.ndarray:
     return (np.concatenate([x, np.ones((len(x), 1))], 1) @ np.linalg.inv(K).T)[:, :2]
 
 
-def estimate_pose_essential(x0: np.ndarray, x1: np.ndarray, K0: np.ndarray, K1: np.ndarray,
-                            threshold: float = 0.5, conf: float = 0.99999
-                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+def estimate_pose_essential(
+    x0: np.ndarray,
+    x1: np.ndarray,
+    K0: np.ndarray,
+    K1: np.ndarray,
+    threshold: float = 0.5,
+    conf: float = 0.99999,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Relative pose by cv2.findEssentialMat (RANSAC) + cv2.recoverPose, as in the LoFTR protocol.
 
     Points are normalised by the intrinsics and the pixel ``threshold`` is divided by the mean focal
@@ -461,7 +510,9 @@ def estimate_pose_essential(x0: np.ndarray, x1: np.ndarray, K0: np.ndarray, K1: 
         return None
     p0, p1 = _normalise(x0, K0), _normalise(x1, K1)
     f_mean = np.mean([K0[0, 0], K0[1, 1], K1[0, 0], K1[1, 1]])
-    E, mask = cv2.findEssentialMat(p0, p1, np.eye(3), method=cv2.RANSAC, prob=conf, threshold=threshold / f_mean)
+    E, mask = cv2.findEssentialMat(
+        p0, p1, np.eye(3), method=cv2.RANSAC, prob=conf, threshold=threshold / f_mean
+    )
     if E is None:
         return None
     best = None
@@ -472,9 +523,15 @@ def estimate_pose_essential(x0: np.ndarray, x1: np.ndarray, K0: np.ndarray, K1: 
     return best[1], best[2], mask.ravel() > 0
 
 
-def pose_errors_sweep(x0: np.ndarray, x1: np.ndarray, K0: np.ndarray, K1: np.ndarray, R_gt: np.ndarray,
-                      t_gt: np.ndarray, thresholds: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 3.0)
-                      ) -> dict[float, float]:
+def pose_errors_sweep(
+    x0: np.ndarray,
+    x1: np.ndarray,
+    K0: np.ndarray,
+    K1: np.ndarray,
+    R_gt: np.ndarray,
+    t_gt: np.ndarray,
+    thresholds: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 3.0),
+) -> dict[float, float]:
     """Pose error ``max(rot, trans)`` in degrees for each essential-RANSAC pixel threshold.
 
     The protocol picks one threshold per method over a whole dataset (the best AUC), never per pair.
@@ -486,8 +543,9 @@ def pose_errors_sweep(x0: np.ndarray, x1: np.ndarray, K0: np.ndarray, K1: np.nda
     return out
 
 
-def pose_from_fundamental(F: np.ndarray, K0: np.ndarray, K1: np.ndarray, x0: np.ndarray,
-                          x1: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+def pose_from_fundamental(
+    F: np.ndarray, K0: np.ndarray, K1: np.ndarray, x0: np.ndarray, x1: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Relative pose from a fundamental matrix: ``E = K1^T F K0`` decomposed by cv2.recoverPose.
 
     Returns:
@@ -501,7 +559,9 @@ def pose_from_fundamental(F: np.ndarray, K0: np.ndarray, K1: np.ndarray, x0: np.
     return R, t.reshape(3), mask.ravel() > 0
 
 
-def pose_auc(errors: np.ndarray, thresholds: tuple[float, ...] = DEFAULTS.pose_thresholds) -> dict[float, float]:
+def pose_auc(
+    errors: np.ndarray, thresholds: tuple[float, ...] = DEFAULTS.pose_thresholds
+) -> dict[float, float]:
     """Area under the recall-vs-error curve up to each threshold, normalised to [0, 1].
 
     The curve starts at (0, 0), rises linearly between the sorted errors (recall i/N at the i-th) and stays
