@@ -1,0 +1,321 @@
+"""Block-pair planes: the match table, relative orientation, plane expansion and pruning (Secs. 3.3-3.4).
+
+Every block pair l gives a plane: a homography ``H_l`` and its matches ``M_l``.  All the matches of all
+block pairs, in original-image pixels, form one :class:`MatchTable`.  :func:`expand_planes` computes for
+every plane the set ``P_l`` of table matches compatible with ``H_l`` (reprojection error, plane side,
+relative orientation and relative scale); matches in no ``P_l`` are pruned.
+
+Reading of the paper's relative-scale test: the text says the patch scale ratio ``psi = sigma' / sigma``
+"must be roughly preserved within the reprojection", "in analogous way to the orientations", but its
+equation only bounds the homography's own local scale, ``psi^H_n in [1/t_sigma, t_sigma]``.  By analogy with
+the orientation test ``|rho - rho^H_n| < t_theta`` we compare the two: ``psi^H_n / psi in [1/t_sigma,
+t_sigma]`` (``relative_scale="patch"``, default).  The literal equation is available as
+``relative_scale="homography"``.  For the inverse mapping (``x'``, ``H^-1``) the expected relative
+orientation and scale are those from image 2 to image 1, ``-rho`` and ``1 / psi``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+import scipy.sparse as sp
+
+from slime_match.errors import ConfigError
+
+__all__ = [
+    "MatchTable",
+    "PlaneConfig",
+    "deduplicate",
+    "expand_planes",
+    "group_relative_orientation",
+    "relative_orientation",
+    "wrap_angle",
+]
+
+log = logging.getLogger("slime_match")
+
+_RELATIVE_SCALE_MODES = ("patch", "homography")
+# unit steps to the 4-connected neighbours n - x, and their directions atan2(n - x)
+_STEPS = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
+_STEP_ANGLES = np.array([0.0, math.pi / 2, math.pi, -math.pi / 2])
+
+
+@dataclass
+class PlaneConfig:
+    """Plane expansion thresholds (paper Sec. 3.4).
+
+    Attributes:
+        t_perp: two-sided reprojection error bound in px.
+        t_theta: relative orientation tolerance in radians (3/8 pi = 67.5 deg).
+        t_sigma: relative scale tolerance (ratio).
+        relative_scale: "patch" (compare psi^H_n with the patch ratio psi) or "homography" (the paper's
+            literal equation: bound psi^H_n alone), see the module docstring.
+        chunk: number of (plane, match) pairs evaluated at once by the reprojection pre-filter.
+    """
+
+    t_perp: float = 15.0
+    t_theta: float = 3.0 * math.pi / 8.0
+    t_sigma: float = 3.0
+    relative_scale: str = "patch"
+    chunk: int = 4_000_000
+
+    def __post_init__(self) -> None:
+        if self.relative_scale not in _RELATIVE_SCALE_MODES:
+            raise ConfigError(
+                f"unknown relative_scale {self.relative_scale!r}; choose one of {_RELATIVE_SCALE_MODES}"
+            )
+        if self.t_perp <= 0 or self.t_theta <= 0 or self.t_sigma < 1 or self.chunk < 1:
+            raise ConfigError("PlaneConfig: need t_perp > 0, t_theta > 0, t_sigma >= 1, chunk >= 1")
+
+
+@dataclass
+class MatchTable:
+    """All block-pair matches of one image pair, in original-image coordinates.
+
+    Attributes:
+        xy0: (M, 2) float64 keypoints in image 1, px.
+        xy1: (M, 2) float64 keypoints in image 2, px.
+        angle0: (M,) float64 patch orientations theta in image 1, radians.
+        angle1: (M,) float64 patch orientations theta' in image 2, radians.
+        scale0: (M,) float64 patch scales sigma in image 1, px.
+        scale1: (M,) float64 patch scales sigma' in image 2, px.
+        weight: (M,) float64 multiplicity (number of merged exact duplicates, 1 otherwise).
+        source: (M,) int64 index of the block pair (plane) the match came from.
+        score: (M,) float64 match dissimilarity, lower is better.
+    """
+
+    xy0: np.ndarray
+    xy1: np.ndarray
+    angle0: np.ndarray
+    angle1: np.ndarray
+    scale0: np.ndarray
+    scale1: np.ndarray
+    weight: np.ndarray
+    source: np.ndarray
+    score: np.ndarray
+
+    def __post_init__(self) -> None:
+        self.xy0 = np.asarray(self.xy0, dtype=np.float64).reshape(-1, 2)
+        self.xy1 = np.asarray(self.xy1, dtype=np.float64).reshape(-1, 2)
+        for name in ("angle0", "angle1", "scale0", "scale1", "weight", "score"):
+            setattr(self, name, np.asarray(getattr(self, name), dtype=np.float64).reshape(-1))
+        self.source = np.asarray(self.source, dtype=np.int64).reshape(-1)
+        m = len(self.xy0)
+        if any(len(getattr(self, f.name)) != m for f in fields(self)):
+            raise ValueError("MatchTable: all fields must have the same length")
+
+    def __len__(self) -> int:
+        return int(self.xy0.shape[0])
+
+    def subset(self, index: np.ndarray) -> MatchTable:
+        """Rows selected by a boolean mask or an index array."""
+        return MatchTable(*(getattr(self, f.name)[index] for f in fields(self)))
+
+    @classmethod
+    def concat(cls, tables: list[MatchTable]) -> MatchTable:
+        """Stack tables row-wise (an empty list gives an empty table)."""
+        if not tables:
+            return cls(*(np.zeros((0, 2)) if f.name in ("xy0", "xy1") else np.zeros(0) for f in fields(cls)))
+        return cls(*(np.concatenate([getattr(t, f.name) for t in tables]) for f in fields(cls)))
+
+    @property
+    def rho(self) -> np.ndarray:
+        """(M,) relative orientations theta' - theta wrapped to (-pi, pi]."""
+        return wrap_angle(self.angle1 - self.angle0)
+
+
+def wrap_angle(a: np.ndarray) -> np.ndarray:
+    """Angles (any shape, radians) wrapped to (-pi, pi]."""
+    return math.pi - np.mod(math.pi - np.asarray(a, dtype=np.float64), 2.0 * math.pi)
+
+
+def deduplicate(table: MatchTable, tol: float = 1e-6) -> tuple[MatchTable, np.ndarray]:
+    """Merge exact duplicate matches (same xy0 and xy1 up to ``tol`` px) into one weighted row.
+
+    The merged row keeps the attributes of the first occurrence, the best (lowest) score, and the sum of the
+    weights.
+
+    Args:
+        table: (M rows) match table.
+        tol: coordinate quantum in px.
+
+    Returns:
+        The (U rows) deduplicated table and (M,) int64 ``inverse`` with ``table row i -> new row inverse[i]``.
+    """
+    if len(table) == 0:
+        return table, np.zeros(0, np.int64)
+    key = np.round(np.hstack([table.xy0, table.xy1]) / tol).astype(np.int64)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    out = table.subset(first)
+    out.weight = np.bincount(inverse, weights=table.weight, minlength=len(first))
+    out.score = np.full(len(first), np.inf)
+    np.minimum.at(out.score, inverse, table.score)
+    return out, inverse
+
+
+def group_relative_orientation(
+    rho: np.ndarray, group: np.ndarray, n_groups: int, bins: int = 16, weights: np.ndarray | None = None
+) -> np.ndarray:
+    """Dominant relative orientation of many groups of matches at once (histogram mode).
+
+    The histogram has ``bins`` cyclic bins centred on ``k 2 pi / bins`` (so 0, the upright case, is a bin
+    centre); the result is the centre of the fullest bin (the lowest one on ties).
+
+    Args:
+        rho: (K,) relative orientations theta' - theta, radians.
+        group: (K,) int group index of each entry, in [0, n_groups).
+        n_groups: number of groups G.
+        bins: number of histogram bins.
+        weights: (K,) entry weights (1 when None).
+
+    Returns:
+        (G,) orientations in (-pi, pi]; NaN for empty groups.
+    """
+    width = 2.0 * math.pi / bins
+    b = np.mod(np.round(np.asarray(rho, dtype=np.float64) / width).astype(np.int64), bins)
+    hist = np.bincount(
+        np.asarray(group, dtype=np.int64) * bins + b, weights=weights, minlength=n_groups * bins
+    ).reshape(n_groups, bins)
+    out = wrap_angle(np.argmax(hist, axis=1) * width)
+    out[hist.sum(axis=1) <= 0] = np.nan
+    return out
+
+
+def relative_orientation(
+    angle0: np.ndarray, angle1: np.ndarray, bins: int = 16, weights: np.ndarray | None = None
+) -> float:
+    """Global relative orientation of a set of matches (paper Secs. 3.3 and 3.6).
+
+    Args:
+        angle0: (K,) patch orientations theta in image 1, radians.
+        angle1: (K,) patch orientations theta' in image 2, radians.
+        bins: number of cyclic histogram bins of rho = theta' - theta (16 in the paper).
+        weights: (K,) match weights (1 when None).
+
+    Returns:
+        Centre of the fullest bin in (-pi, pi] (bins centred on multiples of 2 pi / bins); NaN when K = 0.
+    """
+    rho = np.asarray(angle1, dtype=np.float64) - np.asarray(angle0, dtype=np.float64)
+    return float(group_relative_orientation(rho, np.zeros(len(rho), np.int64), 1, bins, weights)[0])
+
+
+def _candidates(
+    xy0: np.ndarray, xy1: np.ndarray, h: np.ndarray, side: np.ndarray, t_perp: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(plane, match) pairs whose forward error |x' - H x| is below ``t_perp`` with the right plane side.
+
+    The cheap pre-filter: float32, no division (``|x' w - (H x)_{1,2}| < t |w|``), first on the x coordinate
+    over the whole (planes x matches) grid, then on y for the survivors only.  A 1 px margin absorbs the
+    float32 rounding; the exact float64 tests follow in :func:`expand_planes`.
+
+    Args:
+        xy0: (M, 2) float32 points in image 1.
+        xy1: (M, 2) float32 points in image 2.
+        h: (C, 3, 3) homographies of a chunk of planes.
+        side: (C,) their plane sides (+1/-1).
+        t_perp: reprojection threshold in px.
+
+    Returns:
+        (K,) plane indices in [0, C) (sorted) and (K,) match indices.
+    """
+    x, y, u, v = xy0[:, 0], xy0[:, 1], xy1[:, 0], xy1[:, 1]
+    hf = (h * side[:, None, None]).astype(np.float32)  # then w > 0 on the plane's side
+    tol = np.float32(t_perp + 1.0)
+    hc = hf[:, :, :, None]
+    w = hc[:, 2, 0] * x + hc[:, 2, 1] * y + hc[:, 2, 2]
+    ex = hc[:, 0, 0] * x + hc[:, 0, 1] * y + hc[:, 0, 2] - u * w
+    np.abs(ex, out=ex)
+    pl, mi = np.nonzero(ex < tol * w)  # also requires w > 0
+    wk = w[pl, mi]
+    ey = hf[pl, 1, 0] * x[mi] + hf[pl, 1, 1] * y[mi] + hf[pl, 1, 2] - v[mi] * wk
+    keep = np.abs(ey) < tol * wk
+    return pl[keep], mi[keep]
+
+
+def _project_local(h: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per-pair homography mapping of a point and of its 4-neighbourhood.
+
+    Args:
+        h: (K, 3, 3) homographies.
+        x: (K, 2) points.
+
+    Returns:
+        (K, 2) mapped points ``H x``; (K,) third homogeneous coordinate w; (K, 4) local rotations
+        ``rho^H_n = atan2(Hn - Hx) - atan2(n - x)`` (radians) and (K, 4) local scales ``psi^H_n = |Hn - Hx|``
+        for n = x + (1,0), (0,1), (-1,0), (0,-1).
+    """
+    p = np.einsum("kij,kj->ki", h[:, :, :2], x) + h[:, :, 2]  # (K, 3) homogeneous H x
+    cols = h[:, :, :2].transpose(0, 2, 1)  # (K, 2, 3): H [e; 0] for e = (1,0), (0,1)
+    pn = p[:, None] + np.concatenate([cols, -cols], axis=1)  # (K, 4, 3) neighbours, order of _STEPS
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = p[:, :2] / p[:, 2:]
+        d = pn[..., :2] / pn[..., 2:] - q[:, None]
+    return q, p[:, 2], np.arctan2(d[..., 1], d[..., 0]) - _STEP_ANGLES, np.hypot(d[..., 0], d[..., 1])
+
+
+def expand_planes(
+    table: MatchTable, h: np.ndarray, side: np.ndarray, config: PlaneConfig | None = None
+) -> sp.csr_matrix:
+    """Plane expansion and match pruning: the sets P_l of table matches compatible with each H_l.
+
+    A match (x, x', theta, theta', sigma, sigma') joins P_l when all of (paper Sec. 3.4):
+        * two-sided reprojection error ``max(|x' - H x|, |x - H^-1 x'|) < t_perp``;
+        * plane side: ``sign((H [x; 1])_3) == side[l]``;
+        * relative orientation: ``|rho - rho^H_n| < t_theta`` (cyclic) for some neighbour n of x, or
+          ``|-rho - rho^{H^-1}_n'| < t_theta`` for some neighbour n' of x' (8 possibilities);
+        * relative scale: ``psi^H_n / psi in [1/t_sigma, t_sigma]`` for some n, or
+          ``psi^{H^-1}_n' psi in [1/t_sigma, t_sigma]`` for some n' (``relative_scale="patch"``; with
+          "homography" the ratio is ``psi^H_n`` and ``psi^{H^-1}_n'`` alone).
+
+    Args:
+        table: (M rows) all block-pair matches.
+        h: (L, 3, 3) plane homographies, image 1 -> image 2.
+        side: (L,) sign (+1/-1) of the third homogeneous coordinate of ``H_l x`` on the plane's own matches.
+        config: thresholds; paper defaults when None.
+
+    Returns:
+        (L, M) boolean CSR matrix, row l = P_l.
+    """
+    config = config or PlaneConfig()
+    h = np.asarray(h, dtype=np.float64).reshape(-1, 3, 3)
+    side = np.sign(np.asarray(side, dtype=np.float64).reshape(-1))
+    n_planes, n_matches = len(h), len(table)
+    if n_planes == 0 or n_matches == 0:
+        return sp.csr_matrix((n_planes, n_matches), dtype=bool)
+    hinv = np.linalg.inv(h)
+    xy0, xy1 = table.xy0.astype(np.float32), table.xy1.astype(np.float32)
+    rho_all = table.rho
+    step = max(1, config.chunk // n_matches)
+    rows, cols = [], []
+    # pre-filter on chunks of planes, then the exact tests on the gathered candidates, in float64
+    for a in range(0, n_planes, step):
+        pl, mi = _candidates(xy0, xy1, h[a : a + step], side[a : a + step], config.t_perp)
+        pl += a
+        q0, w0, rot0, sc0 = _project_local(h[pl], table.xy0[mi])
+        q1, _, rot1, sc1 = _project_local(hinv[pl], table.xy1[mi])
+        err = np.maximum(
+            np.hypot(*(q0 - table.xy1[mi]).T), np.hypot(*(q1 - table.xy0[mi]).T)
+        )
+        rho = rho_all[mi, None]
+        ok_rot = (np.abs(wrap_angle(rho - rot0)) < config.t_theta).any(1) | (
+            np.abs(wrap_angle(-rho - rot1)) < config.t_theta
+        ).any(1)
+        if config.relative_scale == "patch":
+            psi = (table.scale1[mi] / table.scale0[mi])[:, None]
+            sc0, sc1 = sc0 / psi, sc1 * psi
+        with np.errstate(invalid="ignore"):
+            ok_sc = ((sc0 >= 1.0 / config.t_sigma) & (sc0 <= config.t_sigma)).any(1) | (
+                (sc1 >= 1.0 / config.t_sigma) & (sc1 <= config.t_sigma)
+            ).any(1)
+        keep = (err < config.t_perp) & (np.sign(w0) == side[pl]) & ok_rot & ok_sc
+        rows.append(pl[keep])
+        cols.append(mi[keep])
+    pl, mi = np.concatenate(rows), np.concatenate(cols)
+    log.debug("expand_planes: %d planes x %d matches -> %d memberships", n_planes, n_matches, len(pl))
+    out = sp.csr_matrix((np.ones(len(pl), dtype=bool), (pl, mi)), shape=(n_planes, n_matches))
+    out.sort_indices()
+    return out

@@ -1,0 +1,131 @@
+"""Match table, relative orientation, plane expansion on synthetic planes with exact answers."""
+
+import math
+
+import numpy as np
+import pytest
+
+from slime_match.errors import ConfigError
+from slime_match.geometry.homography import two_sided_error
+from slime_match.slime.planes import (
+    MatchTable,
+    PlaneConfig,
+    deduplicate,
+    expand_planes,
+    relative_orientation,
+    wrap_angle,
+)
+
+
+def _table(xy0, xy1, angle0, angle1, scale0, scale1):
+    m = len(xy0)
+    return MatchTable(xy0, xy1, angle0, angle1, scale0, scale1, np.ones(m), np.zeros(m), np.zeros(m))
+
+
+def _project(h, x):
+    p = np.hstack([x, np.ones((len(x), 1))]) @ h.T
+    return p[:, :2] / p[:, 2:]
+
+
+def test_relative_orientation_histogram():
+    rng = np.random.default_rng(0)
+    a0 = rng.uniform(-np.pi, np.pi, 200)
+    rho = np.concatenate([np.full(120, math.radians(92.0)), rng.uniform(-np.pi, np.pi, 80)])
+    assert relative_orientation(a0, a0 + rho) == pytest.approx(math.pi / 2)
+    # cyclic: values around +-180 deg fall in the same bin
+    r = relative_orientation(np.zeros(4), np.array([3.1, -3.1, 3.12, 0.5]))
+    assert abs(wrap_angle(r - math.pi)) < 1e-12
+    # upright pairs: 0 is a bin centre
+    assert relative_orientation(np.zeros(5), np.full(5, 0.1)) == 0.0
+    # weights decide
+    assert relative_orientation(np.zeros(3), np.array([0.0, 1.0, 1.0]), weights=np.array([5, 1, 1])) == 0.0
+    assert math.isnan(relative_orientation(np.zeros(0), np.zeros(0)))
+
+
+def test_deduplicate_merges_exact_duplicates():
+    xy0 = np.array([[1.0, 2.0], [1.0, 2.0], [5.0, 5.0], [1.0, 2.0 + 1e-9]])
+    xy1 = np.array([[3.0, 4.0], [3.0, 4.0], [6.0, 6.0], [3.0, 4.0]])
+    t = _table(xy0, xy1, np.zeros(4), np.zeros(4), np.ones(4), np.ones(4))
+    t.score = np.array([0.5, 0.2, 0.3, 0.9])
+    d, inv = deduplicate(t)
+    assert len(d) == 2
+    assert inv[0] == inv[1] == inv[3] != inv[2]
+    assert d.weight[inv[0]] == 3 and d.weight[inv[2]] == 1
+    assert d.score[inv[0]] == pytest.approx(0.2)
+    np.testing.assert_allclose(d.xy0[inv], t.xy0, atol=1e-6)
+
+
+def _scene():
+    """Two planes with known H, patches consistent with their plane or deliberately inconsistent."""
+    rng = np.random.default_rng(1)
+    c, s = math.cos(0.4), math.sin(0.4)
+    h_a = np.array([[1.1 * c, -1.1 * s, 40.0], [1.1 * s, 1.1 * c, -20.0], [1e-5, 2e-5, 1.0]])
+    h_b = np.array([[0.7, 0.05, 300.0], [-0.02, 0.75, 100.0], [0.0, 0.0, 1.0]])
+    n = 40
+    xa = rng.uniform(0, 400, (n, 2))
+    xb = rng.uniform(0, 400, (n, 2))
+    x0 = np.vstack([xa, xb])
+    x1 = np.vstack([_project(h_a, xa), _project(h_b, xb)]) + rng.uniform(-3, 3, (2 * n, 2))
+    rho = np.concatenate([np.full(n, 0.4), np.full(n, 0.0)])  # plane A rotates by 0.4 rad, B by ~0
+    psi = np.concatenate([np.full(n, 1.1), np.full(n, 0.72)])
+    a0 = rng.uniform(-np.pi, np.pi, 2 * n)
+    s0 = rng.uniform(2, 10, 2 * n)
+    kind = np.zeros(2 * n, int)  # 0 consistent, 1 bad orientation, 2 bad scale
+    kind[[3, 7, 45, 50]] = 1
+    kind[[5, 11, 60]] = 2
+    rho = np.where(kind == 1, rho + np.pi, rho)  # patches upside down
+    psi = np.where(kind == 2, psi * 5.0, psi)
+    # outliers: random positions
+    xo0, xo1 = rng.uniform(0, 400, (30, 2)), rng.uniform(0, 700, (30, 2))
+    t = _table(
+        np.vstack([x0, xo0]),
+        np.vstack([x1, xo1]),
+        np.concatenate([a0, np.zeros(30)]),
+        np.concatenate([a0 + rho, np.zeros(30)]),
+        np.concatenate([s0, np.ones(30)]),
+        np.concatenate([s0 * psi, np.ones(30)]),
+    )
+    return t, np.stack([h_a, h_b]), n, np.concatenate([kind, np.zeros(30, int)])
+
+
+def test_expand_planes_exact_sets():
+    t, h, n, kind = _scene()
+    p = expand_planes(t, h, np.ones(2)).toarray()
+    assert p.shape == (2, len(t))
+    for l in range(2):
+        err = two_sided_error(h[l], t.xy0, t.xy1)
+        plane = np.zeros(len(t), bool)
+        plane[l * n : (l + 1) * n] = True
+        expected = (err < 15) & (kind == 0)
+        # the geometric part must agree exactly with the geometry module's two-sided error
+        np.testing.assert_array_equal(p[l], expected)
+        assert p[l, plane & (kind == 0)].all() and not p[l, plane & (kind > 0)].any()
+    # each plane's own consistent matches are in, the other plane's matches are out
+    assert not p[0, n : 2 * n].any() and not p[1, :n].any()
+
+
+def test_expand_planes_plane_side_and_literal_scale_mode():
+    t, h, n, kind = _scene()
+    assert expand_planes(t, h, -np.ones(2)).nnz == 0  # every match is on the + side
+    # literal paper equation: only the homography's own scale is bounded -> bad-scale patches pass
+    p = expand_planes(t, h, np.ones(2), PlaneConfig(relative_scale="homography")).toarray()
+    assert p[0, :n][kind[:n] == 2].all()
+    assert not p[0, :n][kind[:n] == 1].any()
+    # a zoom of 4 violates t_sigma = 3 in "homography" mode whatever the patches say
+    z = np.diag([4.0, 4.0, 1.0])
+    xy0 = np.array([[10.0, 10.0], [20.0, 30.0]])
+    tz = _table(xy0, 4 * xy0 + 1.5, np.zeros(2), np.zeros(2), np.ones(2), np.full(2, 4.0))
+    assert expand_planes(tz, z[None], [1], PlaneConfig(relative_scale="homography")).nnz == 0
+    assert expand_planes(tz, z[None], [1]).nnz == 2
+    with pytest.raises(ConfigError):
+        PlaneConfig(relative_scale="nope")
+
+
+def test_expand_planes_chunking_is_invariant():
+    t, h, n, kind = _scene()
+    rng = np.random.default_rng(3)
+    hs = np.concatenate([h, h + rng.normal(0, 1e-3, h.shape) * [[1, 1, 100]] * 0.01, h[::-1]])
+    ref = expand_planes(t, hs, np.ones(len(hs))).toarray()
+    small = expand_planes(t, hs, np.ones(len(hs)), PlaneConfig(chunk=50)).toarray()
+    np.testing.assert_array_equal(ref, small)
+    np.testing.assert_array_equal(ref[4], ref[1])
