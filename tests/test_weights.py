@@ -1,0 +1,75 @@
+"""Weights: kornia's cache layout, HardNet's real checkpoint format, clear errors without network."""
+
+import kornia
+import kornia.core.download as kdownload
+import pytest
+import torch
+
+from slime_match.errors import WeightsNotFoundError
+from slime_match.features.descriptors import Descriptor, resolve_descriptor
+from slime_match.features.laf import PatchPyramid, ellipse_to_laf
+from slime_match.features.weights import checkpoint_dir, is_cached, load_model
+
+
+@pytest.fixture
+def no_network(monkeypatch):
+    """Every download attempt fails at once (non-transient, so kornia does not retry)."""
+
+    def fail(*args, **kwargs):
+        raise RuntimeError("network disabled in tests")
+
+    monkeypatch.setattr(kdownload, "_download_url_to_file", fail)
+
+
+@pytest.fixture
+def hardnet_home(tmp_path):
+    """A torch home whose hub cache holds a HardNet checkpoint in kornia's real format."""
+    folder = tmp_path / "hub" / "checkpoints"
+    folder.mkdir(parents=True)
+    torch.manual_seed(0)
+    net = kornia.feature.HardNet(pretrained=False)
+    torch.save({"state_dict": net.state_dict()}, folder / "checkpoint_liberty_with_aug.pth")
+    return tmp_path, net.eval()
+
+
+def test_hardnet_checkpoint_loads_from_weights_dir_and_torch_home(hardnet_home, monkeypatch, no_network):
+    home, reference = hardnet_home
+    assert checkpoint_dir(home) == home / "hub" / "checkpoints"
+    assert is_cached("hardnet", home)
+    patches = torch.rand(5, 1, 32, 32)
+    with torch.inference_mode():
+        expect = reference(patches)
+        assert torch.allclose(load_model("hardnet", home)(patches), expect, atol=1e-6)
+        monkeypatch.setenv("TORCH_HOME", str(home))
+        assert torch.allclose(load_model("hardnet")(patches), expect, atol=1e-6)
+    desc = Descriptor("hardnet")
+    laf = ellipse_to_laf(torch.tensor([[30.0, 30.0], [50.0, 40.0]]), torch.eye(2).expand(2, 2, 2) / 25)
+    out = desc(PatchPyramid(torch.rand(3, 80, 90)), laf)
+    assert out.shape == (2, desc.dim) and torch.allclose(out.norm(dim=1), torch.ones(2))
+    assert resolve_descriptor("auto") == ("hardnet", None)
+
+
+@pytest.mark.parametrize(
+    ("name", "alternative"),
+    [("hardnet", "--descriptor tfeat or rootsift"), ("affnet", "--shape baumberg"),
+     ("orinet", "--orientation gradient|upright")],
+)
+def test_missing_weights_raise_with_alternatives(tmp_path, no_network, name, alternative):
+    with pytest.raises(WeightsNotFoundError, match="could not be downloaded") as err:
+        load_model(name, tmp_path)
+    assert alternative in str(err.value)
+    assert not any(tmp_path.iterdir())  # nothing half-written
+
+
+def test_auto_descriptor_falls_back_to_rootsift_with_warning(tmp_path, no_network):
+    name, warning = resolve_descriptor("auto", tmp_path)
+    assert name == "rootsift"
+    assert "RootSIFT" in warning and "--descriptor tfeat or rootsift" in warning
+    assert resolve_descriptor("tfeat", tmp_path) == ("tfeat", None)
+
+
+def test_shared_weights_load(no_network):
+    for name in ("affnet", "orinet", "tfeat"):
+        if not is_cached(name):
+            pytest.skip("needs ../shared/weights")
+        assert not load_model(name).training
