@@ -22,7 +22,7 @@ from slime_match.geometry.fundamental import (
     fundamental_8point_batch,
     fundamental_from_homography_and_parallax_batch,
 )
-from slime_match.geometry.homography import homography_dlt, homography_dlt_batch, two_sided_error_batch
+from slime_match.geometry.homography import _inverse, homography_dlt, homography_dlt_batch
 from slime_match.geometry.sampling import sample_subsets, sample_subsets_varying
 from slime_match.types import GeometryResult
 
@@ -136,6 +136,30 @@ def _consistent_side(h: np.ndarray, xs: np.ndarray) -> np.ndarray:
     return np.where((s == s[:, :1]).all(axis=1), s[:, 0], 0.0)
 
 
+def _homography_inlier_mask(
+    h: np.ndarray, side: np.ndarray, x0: np.ndarray, x1: np.ndarray, t: float
+) -> np.ndarray:
+    """(B, K) inliers of B homographies: two-sided error < t and ``side * w > 0``.
+
+    Same test as ``two_sided_error_batch(...) < t`` with the plane side, without divisions or square
+    roots: ``|x1 - p / w| < t`` iff ``|x1 w - p|^2 < t^2 w^2`` for ``p, w = H [x0; 1]``.
+
+    Args:
+        h: (B, 3, 3) homographies; side: (B,) +1/-1; x0, x1: (B, K, 2) or (K, 2) pixels; t: pixels.
+    """
+    x0 = np.broadcast_to(x0, (h.shape[0],) + x0.shape[-2:])
+    x1 = np.broadcast_to(x1, (h.shape[0],) + x1.shape[-2:])
+    t2 = t * t
+    ok = None
+    for m, a, b in ((h, x0, x1), (_inverse(h), x1, x0)):
+        mm = m[:, :, :, None]
+        p = mm[:, :, 0] * a[:, None, :, 0] + mm[:, :, 1] * a[:, None, :, 1] + mm[:, :, 2]  # (B, 3, K)
+        w = p[:, 2]
+        close = (b[..., 0] * w - p[:, 0]) ** 2 + (b[..., 1] * w - p[:, 1]) ** 2 < t2 * w * w
+        ok = close & (w * side[:, None] > 0) if ok is None else ok & close & (w != 0)
+    return ok
+
+
 def _count_homography_inliers(
     h: np.ndarray, side: np.ndarray, own: np.ndarray, data: _Stack, threshold: float, max_elements: int
 ) -> np.ndarray:
@@ -150,15 +174,12 @@ def _count_homography_inliers(
         m = order[start:stop]
         start = stop
         x0, x1, valid = data.gather(own[m])
-        err, w = two_sided_error_batch(h[m], x0, x1)
-        inl = (err < threshold) & (np.sign(w) == side[m, None]) & valid
-        counts[m] = inl.sum(axis=1)
+        counts[m] = (_homography_inlier_mask(h[m], side[m], x0, x1, threshold) & valid).sum(axis=1)
     return counts
 
 
 def _homography_inliers(h: np.ndarray, side: float, x0: np.ndarray, x1: np.ndarray, t: float) -> np.ndarray:
-    err, w = two_sided_error_batch(h[None], x0, x1)
-    return (err[0] < t) & (np.sign(w[0]) == side)
+    return _homography_inlier_mask(h[None], np.array([side]), x0, x1, t)[0]
 
 
 class _Stack:
@@ -320,8 +341,7 @@ def _homography_counts(
     chunk = max(1, max_elements // max(len(x0), 1))
     out = []
     for s in range(0, len(h), chunk):
-        err, w = two_sided_error_batch(h[s : s + chunk], x0, x1)
-        out.append(((err < t) & (np.sign(w) == side[s : s + chunk, None])).sum(axis=1))
+        out.append(_homography_inlier_mask(h[s : s + chunk], side[s : s + chunk], x0, x1, t).sum(axis=1))
     return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
 
 
