@@ -9,6 +9,7 @@ import pytest
 
 from slime_match.errors import ConfigError
 from slime_match.eval import metrics as M
+from slime_match.eval.datasets import load_dataset
 
 
 def _rot(axis, deg):
@@ -50,6 +51,35 @@ def test_fundamental_epipolar_and_local_consistency():
     assert M.correct_matches_fundamental(x0, x1, F).tolist() == [True, True, False, True]
     # with GT: the second is on its epipolar line but off the local flow; the fourth has no GT nearby
     assert M.correct_matches_fundamental(x0, x1, F, gt_corrs=corrs).tolist() == [True, False, False, True]
+
+
+def test_fundamental_local_consistency_under_rotation_and_scale():
+    # GT flow = rotation by 60 degrees and scale 1.5 about (200, 200): the flow of the nearest GT point alone
+    # differs by tens of px, the local affine model predicts exactly
+    A = 1.5 * _rot([0, 0, 1], 60)[:2, :2]
+    warp = lambda p: (p - 200.0) @ A.T + 200.0
+    rng = np.random.default_rng(3)
+    g0 = rng.uniform(0, 400, (150, 2))
+    x0 = rng.uniform(50, 350, (200, 2))
+    x1 = warp(x0)
+    assert M._locally_consistent(x0, x1, g0, warp(g0), 15.0, 50.0, 8, 2).all()
+    assert not M._locally_consistent(x0, x1 + [25.0, 0.0], g0, warp(g0), 15.0, 50.0, 8, 2).any()
+
+
+def test_fundamental_local_consistency_on_real_stereo():
+    (p,) = load_dataset("motorcycle")
+    d = p.disparity
+    rng = np.random.default_rng(0)
+    rows, cols = np.nonzero(np.isfinite(d))
+    pick = rng.choice(len(rows), 1300, replace=False)
+    x0 = np.stack([cols[pick], rows[pick]], 1).astype(float)
+    x1 = x0 - np.stack([d[rows[pick], cols[pick]], np.zeros(len(pick))], 1)
+    corrs = np.concatenate([x0[:300], x1[:300]], 1)  # sparse "hand-taken" GT, as dense as the paper's
+    x0, x1 = x0[300:], x1[300:]
+    slid = x1 + [30.0, 0.0]  # wrong matches that still lie on their epipolar lines
+    assert M.correct_matches_fundamental(x0, slid, p.F).all()
+    assert M.correct_matches_fundamental(x0, x1, p.F, gt_corrs=corrs).mean() > 0.9
+    assert M.correct_matches_fundamental(x0, slid, p.F, gt_corrs=corrs).mean() < 0.12
 
 
 def test_disparity_correctness():
@@ -148,6 +178,7 @@ def test_epipolar_line_area_parallel_and_crossing():
     la = np.array([[0.1, -1.0, c[1] - 0.1 * c[0]]])
     lb = np.array([[-0.1, -1.0, c[1] + 0.1 * c[0]]])
     assert M.epipolar_line_area(la, lb, (50, 100))[0] == pytest.approx(500.0)
+    assert M.epipolar_line_area(la, lb, (50, 100), col_step=4)[0] == pytest.approx(500.0, rel=0.01)
 
 
 def test_failure_counts():

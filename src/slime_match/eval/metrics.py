@@ -36,14 +36,18 @@ class MetricConfig:
         t_perp: correctness / coverage / mAA threshold in px (paper: 15).
         gt_radius: radius in px of the GT-correspondence neighbourhood checked by the non-planar test.
         gt_neighbours: number of nearest GT correspondences used for the local affine flow model.
+        gt_flow_neighbours: nearest GT correspondences whose flow alone may vouch for a match.
         accuracy_step: grid step in px of the valid points sampled by the epipolar accuracy.
+        accuracy_col_step: strip width in px of the line-area integration of the epipolar accuracy.
         pose_thresholds: AUC thresholds in degrees (LoFTR protocol).
     """
 
     t_perp: float = 15.0
     gt_radius: float = 50.0
     gt_neighbours: int = 8
+    gt_flow_neighbours: int = 2
     accuracy_step: int = 8
+    accuracy_col_step: int = 4
     pose_thresholds: tuple[float, ...] = (5.0, 10.0, 20.0)
 
     @classmethod
@@ -112,35 +116,57 @@ def correct_matches_homography(
     return ok & ~in_mask(x0, mask0) & ~in_mask(x1, mask1)
 
 
-def _local_affine_prediction(
-    q: np.ndarray, g_src: np.ndarray, g_dst: np.ndarray, radius: float, k: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Predict where (K, 2) points ``q`` go from the flow of nearby GT correspondences ``g_src -> g_dst``.
+def _locally_consistent(
+    q: np.ndarray,
+    target: np.ndarray,
+    g_src: np.ndarray,
+    g_dst: np.ndarray,
+    t: float,
+    radius: float,
+    k: int,
+    k_flow: int,
+) -> np.ndarray:
+    """Whether correspondences ``q -> target`` agree with the flow of nearby GT correspondences.
 
-    The ``k`` nearest GT correspondences within ``radius`` give a least-squares local affine flow model
-    around ``q`` (translation only when fewer than 3 or collinear neighbours).
+    Among the GT correspondences ``g_src -> g_dst`` within ``radius`` px of ``q``, the ``k`` nearest fit a
+    least-squares local affine flow (translation when fewer than 3 or collinear) that must predict
+    ``target`` within ``t``; alternatively one of the ``k_flow`` nearest, carried to ``q`` by the linear
+    part of that model, must land within ``t`` (so that a match next to a depth discontinuity, where the
+    fit mixes two surfaces, is judged by the GT point on its own side). Points without GT neighbours are
+    not checked (True).
+
+    Args:
+        q, target: (K, 2) points, px.
+        g_src, g_dst: (M, 2) GT correspondences, px.
 
     Returns:
-        (K, 2) predicted positions and (K,) bool, True where at least one neighbour exists.
+        (K,) bool.
     """
     k = min(k, len(g_src))
     dist, idx = cKDTree(g_src).query(q, k=k, distance_upper_bound=radius)
     dist, idx = dist.reshape(len(q), k), idx.reshape(len(q), k)
-    w = np.isfinite(dist).astype(np.float64)  # (K, k)
-    idx = np.where(np.isfinite(dist), idx, 0)
-    d = (g_src[idx] - q[:, None]) / radius  # (K, k, 2), normalised offsets
-    X = np.concatenate([np.ones_like(d[..., :1]), d], axis=-1)  # (K, k, 3)
-    M = np.einsum("nki,nk,nkj->nij", X, w, X)
-    b = np.einsum("nki,nk,nkj->nij", X, w, g_dst[idx])  # (K, 3, 2)
+    near = np.isfinite(dist)  # (K, k), sorted by distance
+    idx = np.where(near, idx, 0)
+    src, dst = g_src[idx], g_dst[idx]  # (K, k, 2)
+    w = near.astype(np.float64)
     n = w.sum(1)
-    has = n > 0
-    flow = np.einsum("nk,nkj->nj", w, g_dst[idx] - g_src[idx]) / np.maximum(n, 1)[:, None]
-    pred = q + flow
+    pred = q + np.einsum("nk,nkj->nj", w, dst - src) / np.maximum(n, 1)[:, None]
+    lin = np.tile(np.eye(2), (len(q), 1, 1))  # linear part of the local map (identity: translation only)
+    X = np.concatenate([np.ones_like(src[..., :1]), (src - q[:, None]) / radius], axis=-1)  # (K, k, 3)
+    M = np.einsum("nki,nk,nkj->nij", X, w, X)
     eig = np.linalg.eigvalsh(M)
     affine = (n >= 3) & (eig[:, 0] > 1e-6 * np.maximum(eig[:, -1], 1e-12))
     if affine.any():
-        pred[affine] = np.linalg.solve(M[affine], b[affine])[:, 0]
-    return pred, has
+        b = np.einsum("nki,nk,nkj->nij", X[affine], w[affine], dst[affine])  # (K', 3, 2)
+        sol = np.linalg.solve(M[affine], b)
+        pred[affine] = sol[:, 0]
+        lin[affine] = np.swapaxes(sol[:, 1:], 1, 2) / radius
+    ok = np.linalg.norm(pred - target, axis=1) < t
+    kf = min(k_flow, k)
+    # each of the kf nearest carried to q by the local linear model: g_dst + L (q - g_src)
+    carried = dst[:, :kf] + np.einsum("nij,nkj->nki", lin, q[:, None] - src[:, :kf])
+    ok |= ((np.linalg.norm(carried - target[:, None], axis=2) < t) & near[:, :kf]).any(1)
+    return ok | (n == 0)
 
 
 def correct_matches_fundamental(
@@ -151,14 +177,16 @@ def correct_matches_fundamental(
     gt_corrs: np.ndarray | None = None,
     radius: float = DEFAULTS.gt_radius,
     neighbours: int = DEFAULTS.gt_neighbours,
+    flow_neighbours: int = DEFAULTS.gt_flow_neighbours,
 ) -> np.ndarray:
     """Correct matches of a non-planar pair.
 
     A match is correct when its maximum epipolar distance w.r.t. ``F_gt`` is below ``t`` and, where GT
-    correspondences are given, it agrees with their local flow: in image 0, the ``neighbours`` nearest GT
-    correspondences within ``radius`` px of ``x0`` fit a local affine flow (translation when fewer than 3)
-    that must predict ``x1`` within ``t``; symmetrically from image 1 back to ``x0``. A direction without
-    any GT correspondence within ``radius`` is not checked (no local evidence there).
+    correspondences are given, it agrees with their local flow in both directions (image 0 -> 1 around
+    ``x0`` and image 1 -> 0 around ``x1``): the local affine flow fitted to the ``neighbours`` nearest GT
+    correspondences within ``radius`` px predicts the other point within ``t``, or the flow of one of the
+    ``flow_neighbours`` nearest agrees within ``t``. A direction without any GT correspondence within
+    ``radius`` is not checked (no local evidence there).
 
     Args:
         x0, x1: (K, 2) matched keypoints, px.
@@ -167,6 +195,7 @@ def correct_matches_fundamental(
         gt_corrs: optional (M, 4) GT correspondences ``x0 y0 x1 y1``.
         radius: neighbourhood radius in px.
         neighbours: neighbours used by the local affine model.
+        flow_neighbours: nearest neighbours whose flow alone may vouch for the match.
 
     Returns:
         (K,) bool.
@@ -180,8 +209,7 @@ def correct_matches_fundamental(
         return ok
     g = np.asarray(gt_corrs, np.float64).reshape(-1, 4)
     for q, target, src, dst in ((x0, x1, g[:, :2], g[:, 2:]), (x1, x0, g[:, 2:], g[:, :2])):
-        pred, has = _local_affine_prediction(q, src, dst, radius, neighbours)
-        ok &= ~has | (np.linalg.norm(pred - target, axis=1) < t)
+        ok &= _locally_consistent(q, target, src, dst, t, radius, neighbours, flow_neighbours)
     return ok
 
 
@@ -348,12 +376,16 @@ def homography_accuracy_error(
     return max(errs)
 
 
-def _band_area(l_a: np.ndarray, l_b: np.ndarray, width: int, height: int, chunk: int = 1024) -> np.ndarray:
+def _band_area(
+    l_a: np.ndarray, l_b: np.ndarray, width: int, height: int, col_step: int, chunk: int = 1024
+) -> np.ndarray:
     """Area in px^2 of the smaller double wedge between line pairs inside a ``width x height`` image.
 
     Two lines split the image into the region where their half-planes disagree and the one where they
     agree (each a pair of opposite wedges); since line signs are arbitrary, the smaller of the two is the
-    area enclosed by the lines. Each pixel column is integrated exactly along y.
+    area enclosed by the lines. The image is cut into vertical strips ``col_step`` px wide: the length
+    along y is exact at each strip centre and the strips are summed (midpoint rule, exact where the
+    length is linear in x, i.e. away from the few kinks where a line leaves the image or the lines cross).
 
     Args:
         l_a, l_b: (N, 3) lines ``a x + b y + c = 0``.
@@ -361,39 +393,42 @@ def _band_area(l_a: np.ndarray, l_b: np.ndarray, width: int, height: int, chunk:
     Returns:
         (N,) areas.
     """
-    xs = np.arange(width, dtype=np.float64)
+    edges = np.append(np.arange(-0.5, width - 0.5, col_step), width - 0.5)
+    xs, widths = (edges[:-1] + edges[1:]) / 2, np.diff(edges)
     y_lo, y_hi = -0.5, height - 0.5
     out = np.empty(len(l_a))
     for s in range(0, len(l_a), chunk):
         ivs = []
         for ln in (l_a[s : s + chunk], l_b[s : s + chunk]):
             a, b, c = (ln[:, i : i + 1] for i in range(3))
-            v = a * xs + c  # (n, W): half-plane is b y > -v
+            v = a * xs + c  # (n, strips): half-plane is b y > -v
             with np.errstate(divide="ignore", invalid="ignore"):
                 y0 = np.clip(-v / b, y_lo, y_hi)
-            full = np.where(v > 0, y_hi, y_lo)  # b == 0: whole column or nothing
+            full = np.where(v > 0, y_hi, y_lo)  # b == 0: whole strip or nothing
             lo = np.where(b > 0, y0, y_lo)
             hi = np.where(b > 0, y_hi, np.where(b < 0, y0, full))
             ivs.append((lo, hi))
         (lo1, hi1), (lo2, hi2) = ivs
         inter = np.maximum(np.minimum(hi1, hi2) - np.maximum(lo1, lo2), 0.0)
-        disagree = ((hi1 - lo1) + (hi2 - lo2) - 2 * inter).sum(1)
+        disagree = ((hi1 - lo1) + (hi2 - lo2) - 2 * inter) @ widths
         out[s : s + chunk] = np.minimum(disagree, width * height - disagree)
     return out
 
 
-def epipolar_line_area(l_est: np.ndarray, l_gt: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+def epipolar_line_area(
+    l_est: np.ndarray, l_gt: np.ndarray, shape: tuple[int, int], col_step: int = 1
+) -> np.ndarray:
     """(N,) area in px^2 enclosed by estimated and GT epipolar lines (N, 3) inside an image of ``shape``.
 
     Pairs whose GT line is closer to vertical are integrated along rows (x and y swapped) so that the
-    per-column integration stays accurate.
+    strip-wise integration stays accurate; ``col_step`` is the strip width in px (1: every pixel column).
     """
     h, w = shape[:2]
     vertical = np.abs(l_gt[:, 0]) > np.abs(l_gt[:, 1])
     area = np.empty(len(l_gt))
-    area[~vertical] = _band_area(l_est[~vertical], l_gt[~vertical], w, h)
+    area[~vertical] = _band_area(l_est[~vertical], l_gt[~vertical], w, h, col_step)
     swap = [1, 0, 2]
-    area[vertical] = _band_area(l_est[vertical][:, swap], l_gt[vertical][:, swap], h, w)
+    area[vertical] = _band_area(l_est[vertical][:, swap], l_gt[vertical][:, swap], h, w, col_step)
     return area
 
 
@@ -403,13 +438,14 @@ def fundamental_accuracy_error(
     valid0: np.ndarray,
     valid1: np.ndarray,
     step: int = DEFAULTS.accuracy_step,
+    col_step: int = DEFAULTS.accuracy_col_step,
 ) -> float:
     """Non-planar accuracy error ``max(E12, E21)`` in px (paper Sec. "Accuracy", after the no-RANSAC
     fundamental-matrix metric).
 
     E12: for the valid pixels x of image 0 on a grid of spacing ``step``, the area inside image 1 enclosed
-    by the epipolar lines ``F_est x`` and ``F_gt x`` (the smaller double wedge between them, exact along
-    each pixel column), divided by the diagonal of image 1 and averaged; E21 likewise with ``F^T`` and the
+    by the epipolar lines ``F_est x`` and ``F_gt x`` (the smaller double wedge between them, integrated
+    over strips ``col_step`` px wide, see :func:`epipolar_line_area`), divided by the diagonal of image 1 and averaged; E21 likewise with ``F^T`` and the
     valid pixels of image 1 measured inside image 0. The image shapes are those of ``valid0``/``valid1``.
 
     Returns:
@@ -424,7 +460,7 @@ def fundamental_accuracy_error(
         if len(pts) == 0:
             raise ValueError("fundamental_accuracy_error: empty valid area")
         ph = np.concatenate([pts, np.ones((len(pts), 1))], 1)
-        area = epipolar_line_area(ph @ Fa.T, ph @ Fb.T, valid_dst.shape)
+        area = epipolar_line_area(ph @ Fa.T, ph @ Fb.T, valid_dst.shape, col_step)
         errs.append(float(area.mean() / math.hypot(*valid_dst.shape[:2])))
     return max(errs)
 
