@@ -121,7 +121,7 @@ def test_ransac_fundamental_recovers_f(planes):
 
 def test_ransac_fundamental_planar_without_parallax_returns_homography():
     rng = np.random.default_rng(4)
-    x0, x1, gt = _stereo_problem(rng, 300, ratio=0.0, depth=(5.0, 5.0))
+    x0, x1, _ = _stereo_problem(rng, 300, ratio=0.0, depth=(5.0, 5.0))
     res = ransac_fundamental(x0, x1)
     assert res.kind == "homography" and res.info["source"] == "homography"
     assert res.inliers.mean() > 0.95
@@ -136,7 +136,12 @@ def test_degenerate_inputs_give_empty_results(kind):
     line1 = np.c_[2 * t + 3, -t + 400]
     dup = np.repeat(rng.uniform(0, 640, (1, 2)), 30, axis=0)
     few = 3 if kind == "homography" else 7
-    for x0, x1 in [(line0, line1), (dup, dup + 5.0), (line0[:few], line1[:few]), (np.zeros((0, 2)), np.zeros((0, 2)))]:
+    for x0, x1 in [
+        (line0, line1),
+        (dup, dup + 5.0),
+        (line0[:few], line1[:few]),
+        (np.zeros((0, 2)), np.zeros((0, 2))),
+    ]:
         res = fit(x0, x1, {"max_iterations": 1000})
         assert res.model is None and res.inliers.shape == (len(x0),) and not res.inliers.any()
 

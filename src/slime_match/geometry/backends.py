@@ -22,7 +22,9 @@ _MAX_ITERATIONS = 10_000
 _CONFIDENCE = 0.999
 
 
-def _magsac(x0: np.ndarray, x1: np.ndarray, kind: str, threshold: float) -> tuple[np.ndarray | None, np.ndarray]:
+def _magsac(
+    x0: np.ndarray, x1: np.ndarray, kind: str, threshold: float
+) -> tuple[np.ndarray | None, np.ndarray]:
     """OpenCV USAC_MAGSAC (MAGSAC++); OpenCV seeds its USAC generator itself (deterministic)."""
     if kind == "homography":
         model, mask = cv2.findHomography(

@@ -158,9 +158,7 @@ def _transfer(h: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, 
     return p[:, 2], d
 
 
-def two_sided_error_batch(
-    h: np.ndarray, x0: np.ndarray, x1: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def two_sided_error_batch(h: np.ndarray, x0: np.ndarray, x1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two-sided reprojection error of many homographies over the same correspondences.
 
     Args:

@@ -325,7 +325,9 @@ def _best_first(counts: np.ndarray) -> int:
     return int(np.argmax(counts))  # argmax returns the first maximum: the earliest drawn model
 
 
-def _epipolar_counts(f: np.ndarray, x0: np.ndarray, x1: np.ndarray, t: float, max_elements: int) -> np.ndarray:
+def _epipolar_counts(
+    f: np.ndarray, x0: np.ndarray, x1: np.ndarray, t: float, max_elements: int
+) -> np.ndarray:
     """(M,) inlier counts of M fundamental matrices on all correspondences."""
     chunk = max(1, max_elements // max(len(x0), 1))
     return np.concatenate(
@@ -425,7 +427,9 @@ def ransac_fundamental(
                 if counts[b] > best_h_count:
                     best_h, best_h_side, best_h_count = h[b], float(side[b]), int(counts[b])
         top = max(best_f_count, best_h_count)
-        bound = int(_iteration_bound(np.array([top]), np.array([n]), 8, cfg)[0]) if top else cfg.max_iterations
+        bound = (
+            int(_iteration_bound(np.array([top]), np.array([n]), 8, cfg)[0]) if top else cfg.max_iterations
+        )
     info["iterations"] = iters
     candidates: list[tuple[np.ndarray, str]] = []
     if best_f is not None:
@@ -438,7 +442,9 @@ def ransac_fundamental(
     refined = [(*_refine_fundamental(f, x0, x1, cfg), source) for f, source in candidates]
     hom = None
     if best_h is not None:
-        hom_cfg = HomographyRansacConfig(threshold=cfg.threshold, degeneracy_threshold=cfg.degeneracy_threshold)
+        hom_cfg = HomographyRansacConfig(
+            threshold=cfg.threshold, degeneracy_threshold=cfg.degeneracy_threshold, refine=cfg.refine
+        )
         hom = _finish_homography(best_h, best_h_side, x0, x1, hom_cfg, dict(info))
         info["homography_inliers"] = int(hom.inliers.sum())
     if refined:
@@ -454,7 +460,12 @@ def ransac_fundamental(
 
 
 def _plane_parallax(
-    h: np.ndarray, side: float, x0: np.ndarray, x1: np.ndarray, cfg: FundamentalRansacConfig, rng: np.random.Generator
+    h: np.ndarray,
+    side: float,
+    x0: np.ndarray,
+    x1: np.ndarray,
+    cfg: FundamentalRansacConfig,
+    rng: np.random.Generator,
 ) -> tuple[np.ndarray | None, int]:
     """RANSAC over pairs of off-plane correspondences completing the plane h into F = [e']_x h.
 
