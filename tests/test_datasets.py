@@ -266,3 +266,18 @@ def test_load_dataset_errors(tmp_path):
         D.load_dataset(f"evd:{tmp_path / 'nope'}")
     with pytest.raises(ConfigError):
         D.Pair("x", tmp_path, tmp_path, "stereo")
+
+
+def test_rotated_graf_keeps_valid_area():
+    require(DATA / "oxford_graf")
+    from slime_match.eval.metrics import valid_area_homography
+
+    p = D.load_dataset("graf")[1]
+    s0 = cv2.imread(str(p.image0)).shape[:2]
+    img1 = cv2.imread(str(p.image1))
+    rp = D.rotated_pair(p, 270)
+    assert np.array_equal(rp.image1, np.rot90(img1, 3))
+    v0, v1 = valid_area_homography(p.H, s0, img1.shape[:2])
+    r0, r1 = valid_area_homography(rp.H, s0, rp.image1.shape[:2])
+    # a 90-degree rotation permutes the pixels of image 1 exactly: same valid pixels, rotated
+    assert np.array_equal(v0, r0) and np.array_equal(np.rot90(v1, 3), r1)
