@@ -1,0 +1,396 @@
+"""DTM: Delaunay Triangulation Matching, a spatial filter of many-to-many candidate matches.
+
+ALGORITHMS.md section 4. Matches are first grouped into *units*, the distinct pairs of rounded positions
+(v0, v1): duplicated matches share their fate. Two units are *near* in an image when they sit on the same
+vertex or on two Delaunay-adjacent non-border vertices; they are consistent when near in both images and
+inconsistent when near in exactly one. Contraction repeatedly removes, walking the units by rank, the
+inconsistent neighbours of every surviving unit, then drops survivors without a surviving consistent
+neighbour. Expansion puts back, from the last removal iteration to the first, the units whose position is
+predicted by the kept triangulation in both directions.
+
+Everything is sparse: adjacency as sorted int64 pair keys, point location with ``Delaunay.find_simplex``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, fields
+
+import numpy as np
+from scipy.spatial import Delaunay, cKDTree
+
+from ..errors import ConfigError
+
+log = logging.getLogger("slime_match")
+
+
+@dataclass
+class DTMConfig:
+    """DTM parameters.
+
+    Attributes:
+        border_spacing: spacing of the border ring vertices, as a multiple of sqrt(W * H / n_vertices).
+        inside_tolerance: pixels by which a point may fall outside the predicted triangle in expansion.
+        max_iterations: safety bound on contraction iterations.
+    """
+
+    border_spacing: float = 1.0
+    inside_tolerance: float = 2.0
+    max_iterations: int = 100
+
+    def __post_init__(self) -> None:
+        if not self.border_spacing > 0:
+            raise ConfigError(f"DTMConfig.border_spacing must be > 0, got {self.border_spacing}")
+        if self.inside_tolerance < 0:
+            raise ConfigError(f"DTMConfig.inside_tolerance must be >= 0 px, got {self.inside_tolerance}")
+        if self.max_iterations < 1:
+            raise ConfigError(f"DTMConfig.max_iterations must be >= 1, got {self.max_iterations}")
+
+    @classmethod
+    def from_dict(cls, options: dict) -> DTMConfig:
+        """Config from a dict; unknown keys raise ConfigError."""
+        names = {f.name for f in fields(cls)}
+        unknown = set(options) - names
+        if unknown:
+            raise ConfigError(f"unknown DTMConfig option(s) {sorted(unknown)}: valid are {sorted(names)}")
+        return cls(**options)
+
+
+@dataclass
+class DTMResult:
+    """Per-candidate DTM outcome.
+
+    Attributes:
+        keep: (K,) bool, the match passes DTM.
+        removed_at: (K,) int64 contraction iteration at which the match was removed, -1 if never.
+        restored: (K,) bool, removed in contraction and put back in expansion.
+    """
+
+    keep: np.ndarray
+    removed_at: np.ndarray
+    restored: np.ndarray
+
+
+@dataclass
+class _Mesh:
+    """Triangulation of one image's kept vertices plus border vertices.
+
+    Attributes:
+        tri: scipy Delaunay; points [0, n) are the kept vertices (``vertex`` ids), the rest are border.
+        vertex: (n,) global vertex id of each non-border point.
+        edges: (E, 2) undirected Delaunay edges between non-border points (local indices, a < b).
+    """
+
+    tri: Delaunay
+    vertex: np.ndarray
+    edges: np.ndarray
+
+
+def _border_ring(size: tuple[int, int], n_vertices: int, scale: float) -> np.ndarray:
+    """(R, 2) points along the four image sides, 1 px outside the pixel grid."""
+    h, w = size
+    step = scale * np.sqrt(w * h / max(n_vertices, 1))
+    xs = np.linspace(-1.0, w, max(int(np.ceil((w + 1) / step)), 1) + 1)
+    ys = np.linspace(-1.0, h, max(int(np.ceil((h + 1) / step)), 1) + 1)[1:-1]
+    top, bottom = np.c_[xs, np.full_like(xs, -1.0)], np.c_[xs, np.full_like(xs, float(h))]
+    left, right = np.c_[np.full_like(ys, -1.0), ys], np.c_[np.full_like(ys, float(w)), ys]
+    return np.concatenate([top, bottom, left, right])
+
+
+def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int],
+                 unmatched: np.ndarray | None, cfg: DTMConfig) -> _Mesh:
+    """Delaunay mesh of the given vertices, the border ring and the carving unmatched keypoints.
+
+    The unmatched keypoints that share a Delaunay triangle with the ring (in the triangulation of
+    everything) become border vertices; the other unmatched keypoints are left out. This carves the hull:
+    long triangles over areas without kept matches now touch a border vertex.
+
+    Args:
+        vertex: (n,) global ids of the kept vertices; vertex_xy: (V, 2) integer positions of all vertices.
+        unmatched: (U, 2) unique rounded unmatched keypoints of this image, or None.
+    """
+    pts = vertex_xy[vertex]
+    n = len(pts)
+    border = _border_ring(size, n, cfg.border_spacing)
+    if unmatched is not None and len(unmatched):
+        free = unmatched[~np.isin(_row_keys(unmatched, size), _row_keys(pts, size))]
+        first_free = n + len(border)
+        s = Delaunay(np.concatenate([pts, border, free])).simplices
+        ring_tri = s[((s >= n) & (s < first_free)).any(1)]
+        carved = np.unique(ring_tri[ring_tri >= first_free]) - first_free
+        border = np.concatenate([border, free[carved]])
+    tri = Delaunay(np.concatenate([pts, border]))
+    s = tri.simplices
+    e = np.concatenate([s[:, [0, 1]], s[:, [1, 2]], s[:, [2, 0]]])
+    e = np.sort(e[(e < n).all(1)], axis=1)
+    e = np.unique(e[:, 0] * n + e[:, 1]) if len(e) else np.zeros(0, np.int64)
+    return _Mesh(tri, vertex, np.stack([e // max(n, 1), e % max(n, 1)], 1))
+
+
+def _locate(tri: Delaunay, q: np.ndarray) -> np.ndarray:
+    """(P,) index of the simplex containing each query point, -1 outside the hull.
+
+    Vectorised visibility walk from a simplex at the nearest vertex (``tri.neighbors`` across the edge
+    facing the most negative barycentric coordinate); SciPy's ``find_simplex`` would first build
+    barycentric transforms for every simplex, which costs more than the triangulation itself.
+    """
+    pts, simp, nbr = tri.points, tri.simplices, tri.neighbors
+    start = np.empty(len(pts), np.int64)
+    start[simp.ravel()] = np.repeat(np.arange(len(simp)), 3)
+    cur = start[cKDTree(pts).query(q)[1]]
+    out = np.full(len(q), -1, np.int64)
+    todo = np.arange(len(q))
+    for _ in range(4 * int(np.sqrt(len(simp))) + 16):
+        if not len(todo):
+            return out
+        s = simp[cur[todo]]
+        a, b, c, p = pts[s[:, 0]], pts[s[:, 1]], pts[s[:, 2]], q[todo]
+        orient = np.sign(_cross(b - a, c - a))
+        lam = np.stack([_cross(b - p, c - p), _cross(c - p, a - p), _cross(a - p, b - p)], 1) * orient[:, None]
+        inside = (orient != 0) & (lam >= 0).all(1)
+        out[todo[inside]] = cur[todo[inside]]
+        step = nbr[cur[todo], np.argmin(lam, 1)]
+        move = ~inside & (step >= 0)
+        cur[todo[move]] = step[move]
+        todo = todo[move]
+    if len(todo):
+        out[todo] = tri.find_simplex(q[todo])
+    return out
+
+
+def _row_keys(xy: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """int64 key of integer positions inside the image."""
+    return xy[:, 1].astype(np.int64) * (size[1] + 2) + xy[:, 0].astype(np.int64)
+
+
+def _near_pairs(unit_vertex: np.ndarray, alive: np.ndarray, mesh: _Mesh, n_units: int) -> np.ndarray:
+    """Sorted int64 keys a * n_units + b of ordered unit pairs a != b, both alive, near in this image."""
+    units = np.flatnonzero(alive)
+    n = len(mesh.vertex)
+    local = np.full(unit_vertex.max() + 1, -1, np.int64)
+    local[mesh.vertex] = np.arange(n)
+    lv = local[unit_vertex[units]]
+    order = np.argsort(lv, kind="stable")
+    units, lv = units[order], lv[order]
+    count = np.bincount(lv, minlength=n)
+    start = np.cumsum(count) - count
+    a = np.concatenate([mesh.edges[:, 0], mesh.edges[:, 1], np.arange(n)])
+    b = np.concatenate([mesh.edges[:, 1], mesh.edges[:, 0], np.arange(n)])
+    pairs = count[a] * count[b]
+    e = np.repeat(np.arange(len(a)), pairs)
+    offset = np.arange(len(e)) - np.repeat(np.cumsum(pairs) - pairs, pairs)
+    ua = units[start[a[e]] + offset // count[b[e]]]
+    ub = units[start[b[e]] + offset % count[b[e]]]
+    keys = ua * n_units + ub
+    return np.sort(keys[ua != ub])
+
+
+def _greedy_survivors(a: np.ndarray, b: np.ndarray, rank: np.ndarray, alive: np.ndarray) -> np.ndarray:
+    """Units surviving the walk by rank where each surviving unit removes its inconsistent neighbours.
+
+    Vectorised in rounds with the same result as the sequential walk: a unit dies once a better-ranked
+    inconsistent neighbour is known to survive, and survives once all of them are known to die.
+
+    Args:
+        a, b: (E,) inconsistent unit pairs with rank[a] < rank[b] (a can remove b).
+        rank: (U,) position of each unit in the walk; alive: (U,) units taking part.
+    """
+    state = np.where(alive, 0, -1).astype(np.int8)  # 0 undecided, 1 survives, -1 removed / absent
+    while True:
+        undecided_b = state[b] == 0
+        a_r, b_r = a[undecided_b], b[undecided_b]
+        if not len(b_r):
+            state[state == 0] = 1
+            return state == 1
+        killed = np.zeros(len(state), bool)
+        killed[b_r[state[a_r] == 1]] = True
+        blocked = np.zeros(len(state), bool)
+        blocked[b_r[state[a_r] == 0]] = True
+        undecided = state == 0
+        state[undecided & killed] = -1
+        state[undecided & ~killed & ~blocked] = 1
+        a, b = a_r, b_r
+
+
+def _local_affine(mesh: _Mesh, src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Affine map image -> other image around each mesh vertex, fitted on its closed neighbourhood.
+
+    Ridge-regularised toward the global affine fit so that degenerate neighbourhoods stay defined.
+
+    Args:
+        src, dst: (n, 2) positions of each mesh vertex and of its representative match in the other image.
+
+    Returns:
+        A (n, 2, 2), c (n, 2): dst ~ c + A (x - src[v]) near vertex v.
+    """
+    n = len(src)
+    glob = np.linalg.lstsq(np.c_[src - src.mean(0), np.ones(n)], dst, rcond=None)[0]
+    v = np.concatenate([mesh.edges[:, 0], mesh.edges[:, 1], np.arange(n)])
+    w = np.concatenate([mesh.edges[:, 1], mesh.edges[:, 0], np.arange(n)])
+    f = np.c_[src[w] - src[v], np.ones(len(v))]  # (E, 3)
+    outer = (f[:, :, None] * f[:, None, :]).reshape(-1, 9)
+    cross = (f[:, :, None] * dst[w][:, None, :]).reshape(-1, 6)
+    mat = np.stack([np.bincount(v, outer[:, k], n) for k in range(9)], 1).reshape(n, 3, 3)
+    rhs = np.stack([np.bincount(v, cross[:, k], n) for k in range(6)], 1).reshape(n, 3, 2)
+    ridge = 1.0  # px^2: negligible against real neighbourhoods, decisive for degenerate ones
+    mat[:, [0, 1], [0, 1]] += ridge
+    rhs[:, :2, :] += ridge * glob[:2][None]
+    sol = np.linalg.solve(mat, rhs)
+    return np.transpose(sol[:, :2, :], (0, 2, 1)), sol[:, 2, :]
+
+
+def _transfer_ok(mesh: _Mesh, vertex_xy_src: np.ndarray, rep_dst: np.ndarray, q_src: np.ndarray,
+                 q_dst: np.ndarray, tol: float) -> np.ndarray:
+    """Whether q_dst lies in the image of the triangle that contains q_src.
+
+    Args:
+        vertex_xy_src: (V, 2) vertex positions in this image; rep_dst: (V, 2) position in the other image of
+            each vertex's representative kept match.
+        q_src, q_dst: (P, 2) the tested units in this and the other image.
+
+    Returns:
+        (P,) bool.
+    """
+    tri, n = mesh.tri, len(mesh.vertex)
+    if len(q_src) == 0 or n == 0:
+        return np.zeros(len(q_src), bool)
+    src_v = vertex_xy_src[mesh.vertex].astype(np.float64)
+    dst_v = rep_dst[mesh.vertex]
+    simplex = _locate(tri, q_src)
+    found = simplex >= 0
+    corners = tri.simplices[np.maximum(simplex, 0)]  # (P, 3)
+    src_tri = tri.points[corners]
+    dst_tri = np.empty_like(src_tri)
+    is_vertex = corners < n
+    dst_tri[is_vertex] = dst_v[corners[is_vertex]]
+    if not is_vertex.all():
+        affine, offset = _local_affine(mesh, src_v, dst_v)
+        _, nearest = cKDTree(src_v).query(q_src)
+        nearest = np.broadcast_to(nearest[:, None], corners.shape)[~is_vertex]
+        rel = src_tri[~is_vertex] - src_v[nearest]
+        dst_tri[~is_vertex] = offset[nearest] + np.einsum("kij,kj->ki", affine[nearest], rel)
+    sign_src = np.sign(_cross(src_tri[:, 1] - src_tri[:, 0], src_tri[:, 2] - src_tri[:, 0]))
+    sign_dst = np.sign(_cross(dst_tri[:, 1] - dst_tri[:, 0], dst_tri[:, 2] - dst_tri[:, 0]))
+    ok = found & (sign_src != 0) & (sign_src == sign_dst)
+    for k in range(3):
+        p, r = dst_tri[:, k], dst_tri[:, (k + 1) % 3]
+        edge = r - p
+        length = np.hypot(edge[:, 0], edge[:, 1])
+        side = sign_dst * _cross(edge, q_dst - p)
+        ok &= (length > 0) & (side >= -tol * length)
+    return ok
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+
+
+def _vertices(xy: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Rounded, clipped positions merged into vertices: (V, 2) float positions, (K,) vertex of each point."""
+    h, w = size
+    r = np.clip(np.rint(xy), [0, 0], [w - 1, h - 1])
+    uniq, inverse = np.unique(_row_keys(r, size), return_inverse=True)
+    return np.c_[uniq % (w + 2), uniq // (w + 2)].astype(np.float64), inverse.reshape(-1)
+
+
+def _prepare_unmatched(xy: np.ndarray | None, size: tuple[int, int]) -> np.ndarray | None:
+    if xy is None or len(xy) == 0:
+        return None
+    return _vertices(np.asarray(xy, np.float64).reshape(-1, 2), size)[0]
+
+
+def dtm_filter(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0: tuple[int, int],
+               size1: tuple[int, int], unmatched0: np.ndarray | None = None,
+               unmatched1: np.ndarray | None = None, config: DTMConfig | dict | None = None) -> DTMResult:
+    """Delaunay Triangulation Matching.
+
+    Args:
+        xy0, xy1: (K, 2) keypoint positions in pixels of the K candidate matches in images 0 and 1.
+        scores: (K,) dissimilarities, lower is better.
+        size0, size1: (H, W) image sizes in pixels.
+        unmatched0, unmatched1: (N0, 2), (N1, 2) the other keypoints of each image (carve the hull).
+        config: DTMConfig, a dict of its fields, or None for the defaults.
+
+    Returns:
+        DTMResult with per-candidate keep flags, removal iterations and restoration flags.
+    """
+    cfg = DTMConfig.from_dict(config) if isinstance(config, dict) else (config or DTMConfig())
+    xy0 = np.asarray(xy0, np.float64).reshape(-1, 2)
+    xy1 = np.asarray(xy1, np.float64).reshape(-1, 2)
+    scores = np.asarray(scores, np.float64).reshape(-1)
+    k = len(xy0)
+    if not (len(xy1) == len(scores) == k):
+        raise ValueError("xy0, xy1 and scores must have the same length")
+    sizes = (tuple(int(s) for s in size0), tuple(int(s) for s in size1))
+    if k == 0:
+        return DTMResult(np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0, bool))
+
+    (vxy0, v0), (vxy1, v1) = _vertices(xy0, sizes[0]), _vertices(xy1, sizes[1])
+    unit_keys, unit_of = np.unique(v0 * len(vxy1) + v1, return_inverse=True)
+    unit_of = unit_of.reshape(-1)
+    n_units = len(unit_keys)
+    uv = (unit_keys // len(vxy1), unit_keys % len(vxy1))
+    uscore = np.full(n_units, np.inf)
+    np.minimum.at(uscore, unit_of, scores)
+    vxy = (vxy0, vxy1)
+    unmatched = (_prepare_unmatched(unmatched0, sizes[0]), _prepare_unmatched(unmatched1, sizes[1]))
+
+    def meshes(alive: np.ndarray) -> tuple[_Mesh, _Mesh]:
+        return tuple(_triangulate(np.unique(uv[s][alive]), vxy[s], sizes[s], unmatched[s], cfg) for s in (0, 1))
+
+    alive = np.ones(n_units, bool)
+    removed_at = np.full(n_units, -1, np.int64)
+    iteration = 0
+    while iteration < cfg.max_iterations and alive.sum() > 0:
+        mesh = meshes(alive)
+        near0, near1 = (_near_pairs(uv[s], alive, mesh[s], n_units) for s in (0, 1))
+        consistent = np.intersect1d(near0, near1, assume_unique=True)
+        inconsistent = np.setxor1d(near0, near1, assume_unique=True)
+        n_consistent = np.bincount(consistent // n_units, minlength=n_units)
+        rank = np.empty(n_units, np.int64)
+        rank[np.lexsort((-n_consistent, uscore))] = np.arange(n_units)
+        a, b = inconsistent // n_units, inconsistent % n_units
+        better = rank[a] < rank[b]
+        survive = _greedy_survivors(a[better], b[better], rank, alive)
+        ca, cb = consistent // n_units, consistent % n_units
+        supported = np.zeros(n_units, bool)
+        supported[ca[survive[ca] & survive[cb]]] = True
+        new_alive = survive & supported
+        removed = alive & ~new_alive
+        if not removed.any():
+            break
+        removed_at[removed] = iteration
+        alive = new_alive
+        iteration += 1
+    log.debug("DTM contraction: %d iterations, %d of %d units kept", iteration, alive.sum(), n_units)
+
+    restored = np.zeros(n_units, bool)
+    for it in range(iteration - 1, -1, -1):
+        cand = np.flatnonzero((removed_at >= it) & ~alive)
+        if not alive.any() or not len(cand):
+            continue
+        mesh = meshes(alive)
+        ok = np.ones(len(cand), bool)
+        for s in (0, 1):
+            o = 1 - s
+            rep = _representatives(uv[s], uscore, alive, len(vxy[s]))
+            rep_dst = np.zeros_like(vxy[s])
+            has = rep >= 0
+            rep_dst[has] = vxy[o][uv[o][rep[has]]]
+            ok &= _transfer_ok(mesh[s], vxy[s], rep_dst, vxy[s][uv[s][cand]], vxy[o][uv[o][cand]],
+                               cfg.inside_tolerance)
+        restored[cand[ok]] = True
+        alive[cand[ok]] = True
+    log.debug("DTM expansion: %d units restored, %d kept", restored.sum(), alive.sum())
+    return DTMResult(alive[unit_of], removed_at[unit_of], restored[unit_of])
+
+
+def _representatives(v_this: np.ndarray, uscore: np.ndarray, alive: np.ndarray,
+                     n_vertices: int) -> np.ndarray:
+    """(V,) best-scored alive unit on each vertex of this image, -1 where none."""
+    units = np.flatnonzero(alive)
+    order = units[np.lexsort((uscore[units], v_this[units]))]
+    first = np.r_[True, v_this[order][1:] != v_this[order][:-1]]
+    rep = np.full(n_vertices, -1, np.int64)
+    rep[v_this[order[first]]] = order[first]
+    return rep
