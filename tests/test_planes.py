@@ -122,7 +122,7 @@ def test_expand_planes_plane_side_and_literal_scale_mode():
 
 
 def test_expand_planes_chunking_is_invariant():
-    t, h, n, kind = _scene()
+    t, h, _, _ = _scene()
     rng = np.random.default_rng(3)
     hs = np.concatenate([h, h + rng.normal(0, 1e-3, h.shape) * [[1, 1, 100]] * 0.01, h[::-1]])
     ref = expand_planes(t, hs, np.ones(len(hs))).toarray()

@@ -158,7 +158,9 @@ class Block:
         """
         h_s, w_s = scaled_image.shape[:2]
         if (w_s, h_s) != self.scaled_size:
-            raise ValueError(f"image is {w_s}x{h_s}, block expects {self.scaled_size[0]}x{self.scaled_size[1]}")
+            raise ValueError(
+                f"image is {w_s}x{h_s}, block expects {self.scaled_size[0]}x{self.scaled_size[1]}"
+            )
         x0, y0, x1, y1 = self.box
         out = np.zeros((y1 - y0, x1 - x0) + scaled_image.shape[2:], dtype=scaled_image.dtype)
         sx0, sy0, sx1, sy1 = max(x0, 0), max(y0, 0), min(x1, w_s), min(y1, h_s)
@@ -168,7 +170,7 @@ class Block:
 
 def scaled_size(height: int, width: int, factor: float) -> tuple[int, int]:
     """(W_s, H_s) = rounded size of a ``height`` x ``width`` image scaled by ``factor``."""
-    return max(1, int(round(width * factor))), max(1, int(round(height * factor)))
+    return max(1, round(width * factor)), max(1, round(height * factor))
 
 
 def _axis_cores(length: int, config: BlockConfig) -> list[tuple[int, int]]:
@@ -179,7 +181,7 @@ def _axis_cores(length: int, config: BlockConfig) -> list[tuple[int, int]]:
         return [(0, length)]
     steps = math.ceil(rest / (config.stride + config.stride_tolerance))
     step = max(rest / steps, config.stride - config.stride_tolerance)
-    starts = [int(round(j * step)) for j in range(steps + 1)]
+    starts = [round(j * step) for j in range(steps + 1)]
     return [(a, min(a + core, length)) for a in starts]
 
 
@@ -191,7 +193,9 @@ def _grid(height: int, width: int, factor: float, scale_index: int, config: Bloc
     for i, (ry0, ry1) in enumerate(rows):
         for j, (cx0, cx1) in enumerate(cols):
             box = (cx0 - pad, ry0 - pad, min(cx1 + pad, w_s + pad), min(ry1 + pad, h_s + pad))
-            blocks.append(Block(scale_index, i, j, factor, (w_s, h_s), box, (cx0, ry0, cx1, ry1), (width, height)))
+            blocks.append(
+                Block(scale_index, i, j, factor, (w_s, h_s), box, (cx0, ry0, cx1, ry1), (width, height))
+            )
     return blocks
 
 
@@ -272,7 +276,7 @@ def _resize_matrix(n_out: int, n_in: int, dtype: np.dtype) -> sp.csr_matrix:
     ratio = n_out / n_in
     stretch = min(ratio, 1.0)
     half = 3.0 / stretch
-    taps = int(math.ceil(2 * half)) + 1
+    taps = math.ceil(2 * half) + 1
     u = (np.arange(n_out) + 0.5) / ratio - 0.5
     j = np.floor(u - half)[:, None].astype(np.int64) + 1 + np.arange(taps)[None]
     w = _lanczos3((u[:, None] - j) * stretch)

@@ -297,9 +297,7 @@ def expand_planes(
         pl += a
         q0, w0, rot0, sc0 = _project_local(h[pl], table.xy0[mi])
         q1, _, rot1, sc1 = _project_local(hinv[pl], table.xy1[mi])
-        err = np.maximum(
-            np.hypot(*(q0 - table.xy1[mi]).T), np.hypot(*(q1 - table.xy0[mi]).T)
-        )
+        err = np.maximum(np.hypot(*(q0 - table.xy1[mi]).T), np.hypot(*(q1 - table.xy0[mi]).T))
         rho = rho_all[mi, None]
         ok_rot = (np.abs(wrap_angle(rho - rot0)) < config.t_theta).any(1) | (
             np.abs(wrap_angle(-rho - rot1)) < config.t_theta
