@@ -12,6 +12,7 @@ import logging
 import math
 from dataclasses import dataclass, fields
 
+import cv2
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -150,10 +151,10 @@ def _lanczos_weights(frac: float) -> torch.Tensor:
 
 
 def _lanczos_upsample2(image: torch.Tensor) -> torch.Tensor:
-    """2x Lanczos-4 upsampling in torch, equivalent to ``cv2.resize(..., INTER_LANCZOS4)`` inside the image.
+    """2x Lanczos-4 upsampling: ``cv2.resize(..., INTER_LANCZOS4)`` on CPU, an equivalent torch kernel elsewhere.
 
     Output pixel u samples the input at u / 2 - 0.25 (pixel-centre convention), so each axis is a two-phase
-    8-tap filter (phase fractions 0.75 and 0.25); borders are replicated.
+    8-tap filter (phase fractions 0.75 and 0.25) with replicated borders, exactly as OpenCV does.
 
     Args:
         image: (C, H, W) float.
@@ -161,6 +162,16 @@ def _lanczos_upsample2(image: torch.Tensor) -> torch.Tensor:
     Returns:
         (C, 2H, 2W) float.
     """
+    if image.device.type == "cpu":
+        src = image.detach().contiguous().numpy()
+        return torch.from_numpy(
+            np.stack([cv2.resize(ch, None, fx=2, fy=2, interpolation=cv2.INTER_LANCZOS4) for ch in src])
+        )
+    return _lanczos_upsample2_torch(image)
+
+
+def _lanczos_upsample2_torch(image: torch.Tensor) -> torch.Tensor:
+    """Torch version of :func:`_lanczos_upsample2`, (C, H, W) -> (C, 2H, 2W)."""
     w_even, w_odd = _lanczos_weights(0.75).tolist(), _lanczos_weights(0.25).tolist()
 
     def along_last(x: torch.Tensor) -> torch.Tensor:
@@ -205,23 +216,42 @@ def _gradient_fields(image: torch.Tensor, color: bool) -> tuple[torch.Tensor, to
     return grey_grad, best
 
 
-def _gaussian_blur(x: torch.Tensor, sigma: float) -> torch.Tensor:
-    """Separable Gaussian smoothing of (C, H, W) with reflected borders, radius ceil(3 sigma).
-
-    Implemented as shifted multiply-adds (much faster than single-channel conv2d on CPU).
-    """
+def _gaussian_kernel(sigma: float) -> np.ndarray:
+    """(2r+1,) normalised sampled Gaussian, r = ceil(3 sigma)."""
     r = _kernel_radius(sigma)
-    t = np.arange(-r, r + 1)
-    k = np.exp(-(t**2) / (2.0 * sigma**2))
-    k = (k / k.sum()).tolist()
+    k = np.exp(-(np.arange(-r, r + 1) ** 2) / (2.0 * sigma**2))
+    return k / k.sum()
+
+
+def _gaussian_blur(x: torch.Tensor, sigma: float) -> torch.Tensor:
+    """Separable Gaussian smoothing of (C, H, W) with reflected borders (``reflect``, i.e. BORDER_REFLECT_101).
+
+    On CPU this calls ``cv2.sepFilter2D`` per channel (about 10x faster than torch here); elsewhere it runs
+    torch shifted multiply-adds (much faster than single-channel conv2d). Both give the same result.
+    """
+    k = _gaussian_kernel(sigma)
+    if x.device.type == "cpu":
+        src = x.detach().contiguous().numpy()
+        k32 = k.astype(np.float32)
+        out = np.empty_like(src)
+        for ch in range(src.shape[0]):
+            cv2.sepFilter2D(src[ch], -1, k32, k32, dst=out[ch], borderType=cv2.BORDER_REFLECT_101)
+        return torch.from_numpy(out)
+    return _gaussian_blur_torch(x, k)
+
+
+def _gaussian_blur_torch(x: torch.Tensor, kernel: np.ndarray) -> torch.Tensor:
+    """Torch separable filtering of (C, H, W) with a symmetric odd kernel and reflected borders."""
+    r = len(kernel) // 2
+    k = kernel.tolist()
     height, width = x.shape[-2:]
     p = F.pad(x[None], (r, r, r, r), mode="reflect")[0]
-    rows = k[r] * p[:, :, r : r + width]
-    for i in range(1, r + 1):
-        rows.add_(p[:, :, r - i : r - i + width] + p[:, :, r + i : r + i + width], alpha=k[r + i])
-    out = k[r] * rows[:, r : r + height]
-    for i in range(1, r + 1):
-        out.add_(rows[:, r - i : r - i + height] + rows[:, r + i : r + i + height], alpha=k[r + i])
+    rows = k[0] * p[:, :, :width]
+    for i in range(1, 2 * r + 1):
+        rows.add_(p[:, :, i : i + width], alpha=k[i])
+    out = k[0] * rows[:, :height]
+    for i in range(1, 2 * r + 1):
+        out.add_(rows[:, i : i + height], alpha=k[i])
     return out
 
 
@@ -311,7 +341,8 @@ def _unique_peaks(
     """
     h = window // 2
     height, width = response.shape
-    pooled = F.max_pool2d(response[None, None], window, stride=1, padding=h)[0, 0]
+    pooled = F.max_pool2d(response[None, None], (1, window), stride=1, padding=(0, h))
+    pooled = F.max_pool2d(pooled, (window, 1), stride=1, padding=(h, 0))[0, 0]
     candidate = (response == pooled) & (response > 0) & (mask > mask_threshold)
     inner = torch.zeros_like(candidate)
     inner[h : height - h, h : width - h] = True
