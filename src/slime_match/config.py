@@ -1,0 +1,103 @@
+"""Matcher configuration: one dataclass tree, named presets, and flat keyword overrides."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from .errors import ConfigError
+from .pipelines import BASE_NAMES, BaseConfig
+from .slime.pipeline import SlimeConfig
+
+METHODS = ("slime", "hz+", "rootsift")
+RANSAC_CHOICES = ("none", "homography", "fundamental", "magsac-homography", "magsac-fundamental",
+                  "poselib-homography", "poselib-fundamental")
+
+
+@dataclass
+class MatchConfig:
+    """Everything that defines a matching run.
+
+    Attributes:
+        method: "slime" (Slime on top of ``base``), or a base pipeline alone: "hz+" / "rootsift".
+        base: the base pipeline options (for Slime: the pipeline run on blocks and tiles).
+        slime: Slime's parameters (the paper's defaults).
+        ransac: post-processing robust estimation: "none", "homography" / "fundamental" (the paper's
+            RANSACs), "magsac-*" (OpenCV MAGSAC++) or "poselib-*".
+        threshold: post-processing RANSAC inlier threshold in px (the paper tests 5, 3, 2, 1).
+        seed: seed of every random choice (RANSAC sampling), for reproducible runs.
+        device: "auto" (CUDA when available), "cpu" or "cuda".
+    """
+
+    method: str = "slime"
+    base: BaseConfig = field(default_factory=BaseConfig)
+    slime: SlimeConfig = field(default_factory=SlimeConfig)
+    ransac: str = "none"
+    threshold: float = 3.0
+    seed: int = 0
+    device: str = "auto"
+
+    def validate(self) -> MatchConfig:
+        _choice("method", self.method, METHODS)
+        _choice("base", self.base.name, BASE_NAMES)
+        _choice("ransac", self.ransac, RANSAC_CHOICES)
+        _choice("descriptor", self.base.descriptor, ("auto", "hardnet", "tfeat", "rootsift"))
+        _choice("shape", self.base.shape, ("affnet", "baumberg"))
+        _choice("orientation", self.base.orientation, ("orinet", "gradient", "upright"))
+        _choice("device", self.device, ("auto", "cpu", "cuda"))
+        if not self.threshold > 0:
+            raise ConfigError(f"threshold must be > 0 px, got {self.threshold}")
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+PRESETS: dict[str, dict[str, Any]] = {
+    "slime": {"method": "slime", "base": "hz+"},
+    "slime-upright": {"method": "slime", "base": "hz+", "upright": True},
+    "slime-rootsift": {"method": "slime", "base": "rootsift"},
+    "hz+": {"method": "hz+"},
+    "hz+-upright": {"method": "hz+", "upright": True},
+    "rootsift": {"method": "rootsift"},
+    "rootsift-upright": {"method": "rootsift", "upright": True},
+}
+
+
+def make_config(preset: str = "slime", **options: Any) -> MatchConfig:
+    """Build a validated MatchConfig from a preset name and flat overrides.
+
+    Flat keys are looked up on MatchConfig, then BaseConfig (``descriptor``, ``shape``, ``upright``...),
+    then SlimeConfig; ``base="rootsift"`` selects the base pipeline. Unknown keys raise ConfigError.
+    """
+    if preset not in PRESETS:
+        raise ConfigError(f"unknown method/preset {preset!r}: choose one of {', '.join(PRESETS)}")
+    config = MatchConfig()
+    settings = {**PRESETS[preset], **{k: v for k, v in options.items() if v is not None}}
+    for key, value in settings.items():
+        if key == "base" and isinstance(value, str):
+            config.base.name = value
+        elif key in ("base", "slime") and dataclasses.is_dataclass(value):
+            setattr(config, key, copy.deepcopy(value))
+        elif _has_field(config, key) and key not in ("base", "slime"):
+            setattr(config, key, value)
+        elif _has_field(config.base, key):
+            setattr(config.base, key, value)
+        elif _has_field(config.slime, key):
+            setattr(config.slime, key, value)
+        else:
+            raise ConfigError(f"unknown option {key!r}")
+    if config.method in BASE_NAMES:
+        config.base.name = config.method
+    return config.validate()
+
+
+def _has_field(obj: Any, name: str) -> bool:
+    return any(f.name == name for f in dataclasses.fields(obj))
+
+
+def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise ConfigError(f"invalid {name} {value!r}: choose one of {', '.join(choices)}")

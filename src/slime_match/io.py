@@ -1,0 +1,154 @@
+"""Image loading (any bit depth / channel count -> float RGB) and atomic result files."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+
+from .errors import ImageError
+
+MIN_IMAGE_SIDE = 32
+
+ImageLike = str | os.PathLike | np.ndarray | torch.Tensor
+
+
+def load_image(source: ImageLike) -> np.ndarray:
+    """Load an image as float32 RGB in [0, 1].
+
+    Args:
+        source: a file path, a numpy array (H, W), (H, W, 1|3|4) of uint8/uint16/float, or a torch tensor
+            (C, H, W) or (H, W, C) with C in {1, 3, 4}. Float inputs are assumed in [0, 1] (values above
+            1.5 are taken as 0..255). Grey is replicated to RGB; alpha is dropped.
+
+    Returns:
+        (H, W, 3) float32 array in [0, 1].
+
+    Raises:
+        ImageError: missing/unreadable/non-image file, wrong array shape, or a side < 32 px.
+    """
+    if isinstance(source, (str, os.PathLike)):
+        array = _read_file(Path(source))
+        name = str(source)
+    elif isinstance(source, torch.Tensor):
+        array = _tensor_to_hwc(source)
+        name = "tensor input"
+    elif isinstance(source, np.ndarray):
+        array = source
+        name = "array input"
+    else:
+        raise ImageError(f"unsupported image type {type(source).__name__}: give a path, numpy array or tensor")
+    image = _to_float_rgb(array, name)
+    height, width = image.shape[:2]
+    if min(height, width) < MIN_IMAGE_SIDE:
+        raise ImageError(f"{name}: image is {width}x{height} px, smaller than {MIN_IMAGE_SIDE} px on a side")
+    return image
+
+
+def _read_file(path: Path) -> np.ndarray:
+    if not path.exists():
+        raise ImageError(f"{path}: no such file")
+    if path.is_dir():
+        raise ImageError(f"{path}: is a directory, not an image")
+    data = np.fromfile(str(path), dtype=np.uint8)
+    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    if image is None:
+        raise ImageError(f"{path}: not a readable image (corrupt file or unsupported format)")
+    if image.ndim == 3:  # OpenCV gives BGR(A)
+        image = cv2.cvtColor(image, cv2.COLOR_BGRA2RGBA if image.shape[2] == 4 else cv2.COLOR_BGR2RGB)
+    return image
+
+
+def _tensor_to_hwc(tensor: torch.Tensor) -> np.ndarray:
+    array = tensor.detach().cpu()
+    if array.ndim == 4 and array.shape[0] == 1:
+        array = array[0]
+    if array.ndim == 3 and array.shape[0] in (1, 3, 4) and array.shape[-1] not in (1, 3, 4):
+        array = array.permute(1, 2, 0)
+    return array.numpy()
+
+
+def _to_float_rgb(array: np.ndarray, name: str) -> np.ndarray:
+    if array.ndim == 3 and array.shape[2] == 1:
+        array = array[:, :, 0]
+    if array.ndim not in (2, 3) or (array.ndim == 3 and array.shape[2] not in (3, 4)):
+        raise ImageError(f"{name}: expected an (H, W), (H, W, 3) or (H, W, 4) image, got shape {array.shape}")
+    if array.dtype == np.uint8:
+        image = array.astype(np.float32) / 255.0
+    elif array.dtype == np.uint16:
+        image = array.astype(np.float32) / 65535.0
+    elif np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer):
+        image = array.astype(np.float32)
+        finite = np.isfinite(image)
+        if not finite.all():
+            image = np.where(finite, image, 0.0)
+        if image.max(initial=0.0) > 1.5:
+            image = image / 255.0
+    else:
+        raise ImageError(f"{name}: unsupported pixel type {array.dtype}")
+    if image.ndim == 2:
+        image = np.repeat(image[:, :, None], 3, axis=2)
+    return np.ascontiguousarray(np.clip(image[:, :, :3], 0.0, 1.0))
+
+
+def to_tensor(image: np.ndarray, device: str | torch.device = "cpu") -> torch.Tensor:
+    """(H, W, 3) float array -> (3, H, W) float32 tensor on ``device``."""
+    return torch.from_numpy(np.ascontiguousarray(image.transpose(2, 0, 1))).to(device=device, dtype=torch.float32)
+
+
+def _atomic_write(path: Path, write) -> None:
+    """Write through a temporary file in the same folder, then rename: never a half-written file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
+    """Save arrays to ``path`` (.npz) atomically."""
+
+    def write(tmp: str) -> None:
+        with open(tmp, "wb") as handle:
+            np.savez(handle, **arrays)
+
+    _atomic_write(Path(path), write)
+
+
+def save_json(path: str | os.PathLike, obj: Any) -> None:
+    """Save a JSON-serialisable object to ``path`` atomically (numpy scalars/arrays converted)."""
+
+    def write(tmp: str) -> None:
+        with open(tmp, "w") as handle:
+            json.dump(obj, handle, indent=2, default=_json_default)
+            handle.write("\n")
+
+    _atomic_write(Path(path), write)
+
+
+def save_figure(path: str | os.PathLike, figure) -> None:
+    """Save a matplotlib figure atomically (format from the file suffix)."""
+    suffix = Path(path).suffix.lstrip(".") or "png"
+    _atomic_write(Path(path), lambda tmp: figure.savefig(tmp, format=suffix, dpi=110, bbox_inches="tight"))
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

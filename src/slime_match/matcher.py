@@ -1,0 +1,116 @@
+"""The public matcher: images in, MatchResult out (Slime or a base pipeline, optional RANSAC)."""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+import numpy as np
+import torch
+
+from . import __version__
+from .config import MatchConfig, make_config
+from .errors import ConfigError
+from .features.descriptors import resolve_descriptor
+from .geometry.backends import estimate_geometry
+from .io import ImageLike, load_image
+from .pipelines import make_base_pipeline
+from .result import MatchResult
+from .slime.pipeline import run_slime
+from .timing import StageTimer
+
+logger = logging.getLogger("slime_match")
+
+
+def resolve_device(name: str) -> torch.device:
+    """"auto" -> CUDA when available else CPU; "cuda" without a GPU is an error."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise ConfigError("device 'cuda' requested but no CUDA GPU is available: use --device cpu")
+    return torch.device(name)
+
+
+class Matcher:
+    """A configured matcher; models are loaded once and reused for every pair.
+
+    Example:
+        >>> matcher = Matcher(make_config("slime", descriptor="tfeat"))
+        >>> result = matcher("a.jpg", "b.jpg")
+    """
+
+    def __init__(self, config: MatchConfig | None = None) -> None:
+        self.config = (config or make_config()).validate()
+        self.device = resolve_device(self.config.device)
+        self.warnings: list[str] = []
+        base = self.config.base
+        if base.name == "hz+" and base.descriptor == "auto":
+            base.descriptor, warning = resolve_descriptor("auto", weights_dir=base.weights_dir)
+            if warning:
+                logger.warning(warning)
+                self.warnings.append(warning)
+        self.pipeline = make_base_pipeline(base, self.device)
+
+    def __call__(self, image0: ImageLike, image1: ImageLike) -> MatchResult:
+        """Match two images (paths, numpy arrays or torch tensors); see :func:`slime_match.match`."""
+        timer = StageTimer()
+        start = time.perf_counter()
+        with timer("load"):
+            array0, array1 = load_image(image0), load_image(image1)
+        config = self.config
+        stages = None
+        if config.method == "slime":
+            output = run_slime(self.pipeline, array0, array1, config.slime, timer, seed=config.seed)
+            xy0, xy1, scores, counts, stages = output.xy0, output.xy1, output.scores, output.counts, output.stages
+        else:
+            xy0, xy1, scores, counts = self._run_base(array0, array1, timer)
+        inliers = model = kind = None
+        if config.ransac != "none":
+            backend, _, kind = config.ransac.rpartition("-")
+            with timer("ransac"):
+                geometry = estimate_geometry(xy0, xy1, kind, backend=backend or "slime",
+                                             threshold=config.threshold, seed=config.seed)
+            inliers, model, kind = geometry.inliers, geometry.model, geometry.kind
+            counts["inliers"] = int(np.sum(inliers))
+        counts["matches"] = int(len(xy0))
+        summary = {
+            "slime_match_version": __version__,
+            "method": config.method,
+            "config": config.to_dict(),
+            "pipeline": self.pipeline.describe(),
+            "device": str(self.device),
+            "image_sizes": {"image0": list(array0.shape[1::-1]), "image1": list(array1.shape[1::-1])},
+            "counts": counts,
+            "seconds": {**timer.as_dict(), "total": round(time.perf_counter() - start, 4)},
+            "warnings": list(self.warnings),
+        }
+        return MatchResult(xy0, xy1, scores, inliers, kind, model, summary, stages)
+
+    def _run_base(self, array0: np.ndarray, array1: np.ndarray, timer: StageTimer):
+        pipeline = self.pipeline
+        with timer("features"):
+            features0 = pipeline.extract(array0)
+            features1 = pipeline.extract(array1)
+        with timer("matching"):
+            matches = pipeline.match(features0, features1, array0.shape[:2], array1.shape[:2])
+        xy0 = features0.xy.detach().cpu().numpy().astype(np.float64)[matches.idx0]
+        xy1 = features1.xy.detach().cpu().numpy().astype(np.float64)[matches.idx1]
+        counts = {"keypoints0": len(features0), "keypoints1": len(features1)}
+        return xy0, xy1, matches.scores, counts
+
+
+def match(image0: ImageLike, image1: ImageLike, method: str = "slime", **options: Any) -> MatchResult:
+    """Match two images.
+
+    Args:
+        image0, image1: paths, (H, W[, C]) numpy arrays or torch tensors (grey, RGB or RGBA; 8/16-bit or float).
+        method: a preset: "slime" (default), "slime-upright", "slime-rootsift", "hz+", "hz+-upright",
+            "rootsift", "rootsift-upright".
+        **options: flat overrides, e.g. ``descriptor="tfeat"``, ``ransac="fundamental"``, ``threshold=3``,
+            ``base="rootsift"``, ``device="cuda"``, ``seed=1`` (see :func:`slime_match.config.make_config`).
+
+    Returns:
+        MatchResult with (K, 2) keypoints in original-image pixels, (K,) scores and a summary.
+    """
+    return Matcher(make_config(method, **options))(image0, image1)

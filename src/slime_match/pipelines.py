@@ -1,0 +1,265 @@
+"""Base matching pipelines (Hz+ and RootSIFT) behind one interface.
+
+A base pipeline turns an image into :class:`~slime_match.types.Features` and two feature sets into
+:class:`~slime_match.types.Matches`. Slime drives it through four calls:
+
+* ``prepare(image)`` -> an image context (tensor, patch pyramid...) built once per image or block;
+* ``detect(context)`` -> features with their own orientation (or upright when configured so);
+* ``describe_fixed(context, features, angle)`` -> the same regions re-described under one fixed
+  orientation (Slime's orientation-refined re-run, Sec. 3.3 of the paper);
+* ``match(f0, f1, size0, size1)`` -> candidate matches after the pipeline's own filter (DTM / FGINN).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from dataclasses import dataclass, field
+from collections.abc import Callable
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+
+from .errors import ConfigError
+from .features.extractor import LocalFeatureExtractor, PatchConfig
+from .features.harrisz import HarrisZConfig, detect_harrisz
+from .features.laf import PatchPyramid
+from .io import to_tensor
+from .matching.blob import BlobConfig, blob_match
+from .matching.dtm import DTMConfig, dtm_filter
+from .matching.nn import match_fginn
+from .types import Features, Matches
+
+logger = logging.getLogger("slime_match")
+
+BASE_NAMES = ("hz+", "rootsift")
+
+CandidateFilter = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass
+class BaseConfig:
+    """Options of a base pipeline.
+
+    Attributes:
+        name: "hz+" (HarrisZ+ + AffNet + OriNet + descriptor + Blob matching + DTM) or "rootsift"
+            (OpenCV DoG + RootSIFT + FGINN, the paper's handcrafted baseline).
+        descriptor: Hz+ descriptor: "auto" | "hardnet" | "tfeat" | "rootsift".
+        shape: Hz+ affine shape: "affnet" | "baumberg".
+        orientation: Hz+ orientation: "orinet" | "gradient" | "upright".
+        upright: no orientation estimation at all (the paper's upright variants); overrides ``orientation``.
+        max_keypoints: detector cap.
+        magnification: patch magnification over the detector region (None = the extractor's default).
+        weights_dir: a folder holding the model weights (else kornia's torch-hub cache, ``TORCH_HOME``).
+        fginn_ratio, fginn_radius: FGINN ratio and spatial radius (px) for the RootSIFT pipeline.
+        use_dtm: run DTM after Blob matching (Hz+); False only for inspection.
+    """
+
+    name: str = "hz+"
+    descriptor: str = "auto"
+    shape: str = "affnet"
+    orientation: str = "orinet"
+    upright: bool = False
+    max_keypoints: int = 8000
+    magnification: float | None = None
+    weights_dir: str | None = None
+    fginn_ratio: float = 0.8
+    fginn_radius: float = 10.0
+    use_dtm: bool = True
+    blob: BlobConfig = field(default_factory=BlobConfig)
+    dtm: DTMConfig = field(default_factory=DTMConfig)
+
+
+class BasePipeline:
+    """Interface of a base pipeline (see the module docstring)."""
+
+    name: str = "base"
+
+    def prepare(self, image: np.ndarray) -> Any:
+        raise NotImplementedError
+
+    def detect(self, context: Any) -> Features:
+        raise NotImplementedError
+
+    def describe_fixed(self, context: Any, features: Features, angle: float) -> Features:
+        raise NotImplementedError
+
+    def match(self, features0: Features, features1: Features, size0: tuple[int, int],
+              size1: tuple[int, int], candidate_filter: CandidateFilter | None = None) -> Matches:
+        """Matches of two feature sets of images of (H, W) ``size0`` / ``size1``.
+
+        ``candidate_filter(xy0, xy1) -> (K,) bool`` drops candidates before the pipeline's spatial filter
+        (Slime's tile refinement keeps only flows close to its planes' flows).
+        """
+        raise NotImplementedError
+
+    def extract(self, image: np.ndarray) -> Features:
+        """Features of an (H, W, 3) float image."""
+        return self.detect(self.prepare(image))
+
+    def describe(self) -> dict[str, Any]:
+        """Parameters actually used (for the output summary)."""
+        return {}
+
+
+@dataclass
+class HzContext:
+    image: torch.Tensor
+    pyramid: PatchPyramid
+
+
+class HzPlusPipeline(BasePipeline):
+    """Hz+: HarrisZ+ -> AffNet|Baumberg -> OriNet|gradient|upright -> HardNet|TFeat|RootSIFT -> Blob -> DTM."""
+
+    name = "hz+"
+
+    def __init__(self, config: BaseConfig, device: torch.device) -> None:
+        self.config = config
+        self.device = device
+        orientation = "upright" if config.upright else config.orientation
+        patch = PatchConfig(shape=config.shape, orientation=orientation, descriptor=config.descriptor,
+                            weights_dir=config.weights_dir)
+        if config.magnification is not None:
+            patch.magnification = config.magnification
+        self.patch = patch
+        self.extractor = LocalFeatureExtractor(patch, device=device)
+        self.harrisz = HarrisZConfig(max_keypoints=config.max_keypoints)
+
+    def prepare(self, image: np.ndarray) -> HzContext:
+        tensor = to_tensor(image, self.device)
+        return HzContext(tensor, PatchPyramid(tensor))
+
+    def detect(self, context: HzContext) -> Features:
+        keypoints = detect_harrisz(context.image, self.harrisz)
+        return self.extractor.extract(context.image, keypoints, pyramid=context.pyramid)
+
+    def describe_fixed(self, context: HzContext, features: Features, angle: float) -> Features:
+        return self.extractor.describe_fixed(context.pyramid, features.shape_laf, angle)
+
+    def match(self, features0, features1, size0, size1, candidate_filter=None) -> Matches:
+        if len(features0) == 0 or len(features1) == 0:
+            return Matches.empty()
+        candidates = blob_match(features0.descriptors, features1.descriptors, features0.xy, features1.xy,
+                                self.config.blob)
+        xy0 = features0.xy.detach().cpu().numpy().astype(np.float64)
+        xy1 = features1.xy.detach().cpu().numpy().astype(np.float64)
+        if candidate_filter is not None and len(candidates):
+            candidates = candidates.subset(candidate_filter(xy0[candidates.idx0], xy1[candidates.idx1]))
+        if not self.config.use_dtm or len(candidates) == 0:
+            return candidates
+        keep = dtm_filter(xy0[candidates.idx0], xy1[candidates.idx1], candidates.scores, size0, size1,
+                          unmatched0=_unmatched(xy0, candidates.idx0), unmatched1=_unmatched(xy1, candidates.idx1),
+                          config=self.config.dtm).keep
+        return candidates.subset(keep)
+
+    def describe(self) -> dict[str, Any]:
+        return {"base": "hz+", "detector": "harrisz+", **dataclasses.asdict(self.harrisz),
+                **{k: str(v) if k == "weights_dir" else v for k, v in dataclasses.asdict(self.patch).items()},
+                "matcher": "blob+dtm" if self.config.use_dtm else "blob"}
+
+
+def _unmatched(xy: np.ndarray, used: np.ndarray) -> np.ndarray:
+    mask = np.ones(len(xy), bool)
+    mask[used] = False
+    return xy[mask]
+
+
+@dataclass
+class SiftContext:
+    grey: np.ndarray  # (H, W) uint8
+
+
+class RootSiftPipeline(BasePipeline):
+    """OpenCV DoG keypoints + RootSIFT descriptors + FGINN matching (upright: all angles set to 0)."""
+
+    name = "rootsift"
+
+    def __init__(self, config: BaseConfig, device: torch.device) -> None:
+        self.config = config
+        self.device = device
+        self.sift = cv2.SIFT_create(nfeatures=config.max_keypoints)
+
+    def prepare(self, image: np.ndarray) -> SiftContext:
+        grey = cv2.cvtColor((np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8), cv2.COLOR_RGB2GRAY)
+        return SiftContext(grey)
+
+    def detect(self, context: SiftContext) -> Features:
+        keypoints = self.sift.detect(context.grey, None)
+        if self.config.upright:
+            keypoints = _upright_unique(keypoints)
+        return self._describe(context, keypoints)
+
+    def describe_fixed(self, context: SiftContext, features: Features, angle: float) -> Features:
+        laf = features.laf.detach().cpu().numpy()
+        scale = features.scale.detach().cpu().numpy()
+        keypoints = [cv2.KeyPoint(float(x), float(y), float(2.0 * s), math.degrees(angle) % 360.0)
+                     for (x, y), s in zip(laf[:, :, 2], scale)]
+        return self._describe(context, keypoints)
+
+    def _describe(self, context: SiftContext, keypoints) -> Features:
+        if not keypoints:
+            return _empty_features(128, self.device)
+        keypoints, descriptors = self.sift.compute(context.grey, keypoints)
+        if descriptors is None or not keypoints:
+            return _empty_features(128, self.device)
+        descriptors = descriptors.astype(np.float32)
+        descriptors /= np.maximum(descriptors.sum(1, keepdims=True), 1e-12)
+        descriptors = np.sqrt(descriptors)
+        xy = np.array([k.pt for k in keypoints], np.float32)
+        scale = np.array([k.size / 2.0 for k in keypoints], np.float32)
+        angle = np.radians(np.array([k.angle for k in keypoints], np.float32))
+        cos, sin = np.cos(angle) * scale, np.sin(angle) * scale
+        laf = np.stack([np.stack([cos, -sin, xy[:, 0]], 1), np.stack([sin, cos, xy[:, 1]], 1)], 1)
+        shape = laf.copy()
+        shape[:, :, :2] = np.eye(2, dtype=np.float32) * scale[:, None, None]
+        response = np.array([k.response for k in keypoints], np.float32)
+        as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a)).to(self.device)  # noqa: E731
+        return Features(as_tensor(laf), as_tensor(descriptors), as_tensor(response), as_tensor(shape))
+
+    def match(self, features0, features1, size0, size1, candidate_filter=None) -> Matches:
+        if len(features0) < 2 or len(features1) < 2:
+            return Matches.empty()
+        matches = match_fginn(features0.descriptors, features1.descriptors, features0.xy, features1.xy,
+                              ratio=self.config.fginn_ratio, spatial_radius=self.config.fginn_radius)
+        if candidate_filter is not None and len(matches):
+            xy0 = features0.xy.detach().cpu().numpy().astype(np.float64)[matches.idx0]
+            xy1 = features1.xy.detach().cpu().numpy().astype(np.float64)[matches.idx1]
+            matches = matches.subset(candidate_filter(xy0, xy1))
+        return matches
+
+    def describe(self) -> dict[str, Any]:
+        return {"base": "rootsift", "detector": "opencv-dog", "descriptor": "rootsift", "matcher": "fginn",
+                "upright": self.config.upright, "fginn_ratio": self.config.fginn_ratio,
+                "fginn_radius": self.config.fginn_radius}
+
+
+def _upright_unique(keypoints) -> list:
+    """Drop OpenCV's extra orientations of one DoG point and set every angle to 0."""
+    seen, out = set(), []
+    for k in keypoints:
+        key = (round(k.pt[0], 3), round(k.pt[1], 3), round(k.size, 3))
+        if key not in seen:
+            seen.add(key)
+            out.append(cv2.KeyPoint(k.pt[0], k.pt[1], k.size, 0.0, k.response, k.octave, k.class_id))
+    return out
+
+
+def _empty_features(dim: int, device: torch.device) -> Features:
+    zeros = lambda *shape: torch.zeros(shape, device=device)  # noqa: E731
+    return Features(zeros(0, 2, 3), zeros(0, dim), zeros(0), zeros(0, 2, 3))
+
+
+def make_base_pipeline(config: BaseConfig, device: torch.device | str = "cpu") -> BasePipeline:
+    """Build the base pipeline named by ``config.name``."""
+    device = torch.device(device)
+    if config.name == "hz+":
+        return HzPlusPipeline(config, device)
+    if config.name == "rootsift":
+        return RootSiftPipeline(config, device)
+    raise ConfigError(f"unknown base pipeline {config.name!r}: choose one of {', '.join(BASE_NAMES)}")
+
+
+__all__ = ["BaseConfig", "BasePipeline", "HzPlusPipeline", "RootSiftPipeline", "make_base_pipeline"]

@@ -1,0 +1,82 @@
+"""MatchResult: what ``slime_match.match`` returns and ``slime match`` writes."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .io import save_json, save_npz
+from .types import GeometryResult
+
+
+@dataclass
+class MatchResult:
+    """Correspondences between two images, in original-image pixel coordinates.
+
+    Attributes:
+        keypoints0: (K, 2) float64 (x, y) in image 0; the centre of the top-left pixel is (0, 0).
+        keypoints1: (K, 2) float64 (x, y) in image 1.
+        scores: (K,) float64 match dissimilarity (lower is better).
+        inliers: (K,) bool mask of the post-processing RANSAC, or None when it did not run.
+        geometry_kind: "homography" / "fundamental" for ``model``, or None.
+        model: (3, 3) H (image 0 -> 1) or F (x1^T F x0 = 0) from the post-processing RANSAC, or None.
+        summary: method, every parameter used, counts, per-stage seconds, warnings.
+        stages: optional per-stage arrays (Slime's intermediate sets, for ``slime viz``).
+    """
+
+    keypoints0: np.ndarray
+    keypoints1: np.ndarray
+    scores: np.ndarray
+    inliers: np.ndarray | None = None
+    geometry_kind: str | None = None
+    model: np.ndarray | None = None
+    summary: dict[str, Any] = field(default_factory=dict)
+    stages: dict[str, np.ndarray] | None = None
+
+    def __post_init__(self) -> None:
+        self.keypoints0 = np.asarray(self.keypoints0, dtype=np.float64).reshape(-1, 2)
+        self.keypoints1 = np.asarray(self.keypoints1, dtype=np.float64).reshape(-1, 2)
+        self.scores = np.asarray(self.scores, dtype=np.float64).reshape(-1)
+        if not (len(self.keypoints0) == len(self.keypoints1) == len(self.scores)):
+            raise ValueError("keypoints0, keypoints1 and scores must have the same length")
+
+    def __len__(self) -> int:
+        return int(self.keypoints0.shape[0])
+
+    def geometry(
+        self, kind: str = "fundamental", backend: str = "slime", threshold: float = 3.0, seed: int = 0
+    ) -> GeometryResult:
+        """Robust two-view model of these matches (see ``slime_match.geometry.backends``)."""
+        from .geometry.backends import estimate_geometry
+
+        return estimate_geometry(self.keypoints0, self.keypoints1, kind, backend=backend, threshold=threshold,
+                                 seed=seed)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The arrays of ``matches.npz``: keypoints0/1, scores, and inliers + H or F when RANSAC ran."""
+        out = {"keypoints0": self.keypoints0, "keypoints1": self.keypoints1, "scores": self.scores}
+        if self.inliers is not None:
+            out["inliers"] = np.asarray(self.inliers, dtype=bool)
+            if self.model is not None:
+                out["H" if self.geometry_kind == "homography" else "F"] = np.asarray(self.model, np.float64)
+        return out
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the arrays to an .npz (atomically) and the summary next to it as ``<stem>.json``."""
+        path = Path(path)
+        save_npz(path, **self.arrays())
+        if self.summary:
+            save_json(path.with_suffix(".json"), self.summary)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> MatchResult:
+        """Read a ``matches.npz`` written by :meth:`save` or by ``slime match``."""
+        with np.load(path) as data:
+            kind = "homography" if "H" in data else "fundamental" if "F" in data else None
+            model = data["H"] if "H" in data else data["F"] if "F" in data else None
+            inliers = data["inliers"] if "inliers" in data else None
+            return cls(data["keypoints0"], data["keypoints1"], data["scores"], inliers, kind, model)

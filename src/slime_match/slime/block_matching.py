@@ -1,0 +1,250 @@
+"""Slime Secs. 3.2-3.3: block-pair planar matching and its orientation-refined re-run.
+
+Speed by design (the paper's SM "Slime running time"): keypoints, shapes and descriptors are computed
+once per image and block scale on the whole scaled image and shared by every block that contains the
+keypoint (a block owns the keypoints of its core, i.e. the block minus its 32 px padding); descriptors
+under a fixed orientation are computed once per (scale, orientation bin) and only for the keypoints that
+a block pair needs; RANSACs of all block pairs run as one batch.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..geometry.ransac import HomographyRansacConfig, ransac_homography_many
+from ..pipelines import BasePipeline
+from ..types import Features, Matches
+from .blocks import Block, BlockConfig, make_blocks, points_in_blocks, resize_lanczos
+from .planes import relative_orientation
+
+logger = logging.getLogger("slime_match")
+
+
+@dataclass
+class ScaleLevel:
+    """The features of one image at one block scale, shared by all blocks of that scale.
+
+    Attributes:
+        factor: scaled size / original size.
+        size: (H, W) of the scaled image.
+        context: the base pipeline's image context of the scaled image.
+        features: (N) features in scaled-image pixels, with the pipeline's own orientation.
+        blocks: indices (into the image's block list) of the blocks of this scale.
+        members: per block of this scale, the (n_b,) indices of the features in its core.
+        fixed: cache of fixed-orientation descriptors: bin -> (computed mask (N,), descriptors (N, D)).
+    """
+
+    factor: float
+    size: tuple[int, int]
+    context: Any
+    features: Features
+    blocks: list[int]
+    members: list[np.ndarray]
+    fixed: dict[int, tuple[np.ndarray, torch.Tensor | None]] = field(default_factory=dict)
+
+
+def build_levels(pipeline: BasePipeline, image: np.ndarray, blocks: list[Block]) -> list[ScaleLevel]:
+    """Detect and describe each block scale once on the whole (Lanczos-)scaled image.
+
+    Args:
+        pipeline: the base pipeline.
+        image: (H, W, 3) float image.
+        blocks: the image's blocks (``make_blocks``).
+
+    Returns:
+        One ScaleLevel per distinct block scale, in increasing scale index.
+    """
+    levels = []
+    for scale_index in sorted({b.scale_index for b in blocks}):
+        members_blocks = [i for i, b in enumerate(blocks) if b.scale_index == scale_index]
+        factor = blocks[members_blocks[0]].factor
+        scaled = resize_lanczos(image, factor)
+        context = pipeline.prepare(scaled)
+        features = pipeline.detect(context)
+        original = blocks[members_blocks[0]].to_original(features.xy.detach().cpu().numpy())
+        inside = points_in_blocks(original, [blocks[i] for i in members_blocks])
+        members = [inside.indices[inside.indptr[k]:inside.indptr[k + 1]] for k in range(len(members_blocks))]
+        levels.append(ScaleLevel(factor, scaled.shape[:2], context, features, members_blocks, members))
+    return levels
+
+
+def orientation_bin(angle: float, bins: int) -> int:
+    """Index of the histogram bin whose centre is ``angle`` (radians), bins of 2 pi / bins from 0."""
+    return int(round(angle / (2 * math.pi / bins))) % bins
+
+
+def fixed_features(pipeline: BasePipeline, level: ScaleLevel, index: np.ndarray, bin_index: int,
+                   bins: int) -> Features:
+    """Features ``index`` of a level re-described under the fixed orientation of ``bin_index`` (cached)."""
+    n = len(level.features)
+    computed, descriptors = level.fixed.get(bin_index, (np.zeros(n, bool), None))
+    missing = index[~computed[index]]
+    if len(missing):
+        angle = bin_index * 2 * math.pi / bins
+        fresh = pipeline.describe_fixed(level.context, level.features.subset(torch.from_numpy(missing)), angle)
+        if descriptors is None:
+            descriptors = torch.zeros(n, fresh.descriptors.shape[1], device=fresh.descriptors.device)
+        descriptors[torch.from_numpy(missing).to(descriptors.device)] = fresh.descriptors
+        computed = computed.copy()
+        computed[missing] = True
+        level.fixed[bin_index] = (computed, descriptors)
+    laf = _fixed_laf(level.features, index, bin_index * 2 * math.pi / bins)
+    select = torch.from_numpy(index).to(descriptors.device)
+    return Features(laf, descriptors[select], level.features.response[select])
+
+
+def _fixed_laf(features: Features, index: np.ndarray, angle: float) -> torch.Tensor:
+    """LAFs of the fixed-orientation features: the shape frame turned to ``angle`` (isotropic scale kept)."""
+    from ..features.laf import set_laf_angle
+
+    shape = features.shape_laf[torch.from_numpy(index).to(features.shape_laf.device)]
+    return set_laf_angle(shape, angle)
+
+
+@dataclass
+class BlockPairMatches:
+    """Matches of block pairs, in scaled-image pixels of each side.
+
+    Attributes:
+        pairs: (P, 2) block indices (w in image 0, w' in image 1) of the pairs that produced a plane.
+        H: (P, 3, 3) homographies from scaled image 0 (of block w) to scaled image 1 (of block w').
+        theta: (P,) plane orientation theta* (radians) used for the refined run.
+        match_pair: (M,) index into ``pairs`` of each match.
+        xy0, xy1: (M, 2) matched keypoints in the scaled images.
+        scale0, scale1: (M,) patch scales in scaled-image pixels.
+        scores: (M,) base-pipeline dissimilarities.
+    """
+
+    pairs: np.ndarray
+    H: np.ndarray
+    theta: np.ndarray
+    match_pair: np.ndarray
+    xy0: np.ndarray
+    xy1: np.ndarray
+    scale0: np.ndarray
+    scale1: np.ndarray
+    scores: np.ndarray
+
+
+def _local(features: Features, box) -> Features:
+    """The same features with LAF centres shifted into a block's own frame."""
+    laf = features.laf.clone()
+    laf[:, 0, 2] -= box[0]
+    laf[:, 1, 2] -= box[1]
+    return Features(laf, features.descriptors, features.response, features.shape_laf)
+
+
+def _match_pairs(pipeline, pairs, get0, get1, blocks0, blocks1):
+    """Run the base pipeline on block pairs; returns per pair (f0, f1, Matches)."""
+    out = []
+    for w0, w1 in pairs:
+        f0, f1 = get0(w0), get1(w1)
+        b0, b1 = blocks0[w0], blocks1[w1]
+        size0, size1 = b0.shape, b1.shape
+        if len(f0) < 4 or len(f1) < 4:
+            out.append((f0, f1, Matches.empty()))
+            continue
+        out.append((f0, f1, pipeline.match(_local(f0, b0.box), _local(f1, b1.box), size0, size1)))
+    return out
+
+
+def match_block_pairs(
+    pipeline: BasePipeline,
+    levels0: list[ScaleLevel],
+    levels1: list[ScaleLevel],
+    blocks0: list[Block],
+    blocks1: list[Block],
+    ransac: HomographyRansacConfig,
+    bins: int = 16,
+    min_matches: int = 8,
+    seed: int = 0,
+) -> tuple[BlockPairMatches, dict[str, int]]:
+    """Secs. 3.2 + 3.3 for every block pair: base pipeline + homography RANSAC, then the re-run with
+    fixed orientations (theta = 0 in image 0, theta* in image 1) + RANSAC -> M_l and H_l.
+
+    Returns:
+        The refined planes and their matches, and counts for the summary.
+    """
+    where0 = {w: (lv, i) for lv in levels0 for i, w in enumerate(lv.blocks)}
+    where1 = {w: (lv, i) for lv in levels1 for i, w in enumerate(lv.blocks)}
+    pairs = [(w0, w1) for w0 in range(len(blocks0)) for w1 in range(len(blocks1))]
+
+    def own(where):
+        def get(w):
+            level, i = where[w]
+            return level.features.subset(torch.from_numpy(level.members[i]))
+        return get
+
+    # 3.2: the base pipeline with its own orientations, then RANSAC.
+    first = _match_pairs(pipeline, pairs, own(where0), own(where1), blocks0, blocks1)
+    problems = [_positions(f0, f1, m) for f0, f1, m in first]
+    results = ransac_homography_many(problems, ransac, seed=seed)
+    thetas = {}
+    for pair, (f0, f1, m), res in zip(pairs, first, results):
+        if res.model is None or res.inliers.sum() < min_matches:
+            continue
+        m_in = m.subset(res.inliers)
+        rho = (f1.angle[torch.from_numpy(m_in.idx1)] - f0.angle[torch.from_numpy(m_in.idx0)]).cpu().numpy()
+        thetas[pair] = relative_orientation(np.zeros_like(rho), rho, bins=bins)
+
+    # 3.3: re-run with fixed orientations on the pairs that produced a plane.
+    refined_pairs = list(thetas)
+    bin_of = {pair: orientation_bin(theta, bins) for pair, theta in thetas.items()}
+
+    def fixed0(w):
+        level, i = where0[w]
+        return fixed_features(pipeline, level, level.members[i], 0, bins)
+
+    second = []
+    for pair in refined_pairs:
+        level1, i1 = where1[pair[1]]
+        f1 = fixed_features(pipeline, level1, level1.members[i1], bin_of[pair], bins)
+        second.extend(_match_pairs(pipeline, [pair], fixed0, lambda _w, f1=f1: f1, blocks0, blocks1))
+    results = ransac_homography_many([_positions(f0, f1, m) for f0, f1, m in second], ransac, seed=seed + 1)
+
+    keep_pairs, hs, theta_out, parts = [], [], [], []
+    for pair, (f0, f1, m), res in zip(refined_pairs, second, results):
+        if res.model is None or res.inliers.sum() < min_matches:
+            continue
+        m_in = m.subset(res.inliers)
+        keep_pairs.append(pair)
+        hs.append(res.model)
+        theta_out.append(bin_of[pair] * 2 * math.pi / bins)
+        parts.append((len(keep_pairs) - 1, f0, f1, m_in))
+    counts = {"block_pairs": len(pairs), "block_planes_first": len(thetas), "block_planes": len(keep_pairs)}
+    return _collect(keep_pairs, hs, theta_out, parts), counts
+
+
+def _positions(f0: Features, f1: Features, m: Matches) -> tuple[np.ndarray, np.ndarray]:
+    xy0 = f0.xy.detach().cpu().numpy().astype(np.float64)[m.idx0]
+    xy1 = f1.xy.detach().cpu().numpy().astype(np.float64)[m.idx1]
+    return xy0, xy1
+
+
+def _collect(pairs, hs, thetas, parts) -> BlockPairMatches:
+    if not parts:
+        z = np.zeros
+        return BlockPairMatches(z((0, 2), np.int64), z((0, 3, 3)), z(0), z(0, np.int64), z((0, 2)), z((0, 2)),
+                                z(0), z(0), z(0))
+    cols = {k: [] for k in ("pair", "xy0", "xy1", "s0", "s1", "score")}
+    for index, f0, f1, m in parts:
+        i0, i1 = torch.from_numpy(m.idx0), torch.from_numpy(m.idx1)
+        cols["pair"].append(np.full(len(m), index))
+        cols["xy0"].append(f0.xy[i0].cpu().numpy())
+        cols["xy1"].append(f1.xy[i1].cpu().numpy())
+        cols["s0"].append(f0.scale[i0].cpu().numpy())
+        cols["s1"].append(f1.scale[i1].cpu().numpy())
+        cols["score"].append(m.scores)
+    cat = {k: np.concatenate(v).astype(np.int64 if k == "pair" else np.float64) for k, v in cols.items()}
+    return BlockPairMatches(np.asarray(pairs, np.int64), np.stack(hs), np.asarray(thetas), cat["pair"],
+                            cat["xy0"], cat["xy1"], cat["s0"], cat["s1"], cat["score"])
+
+
+__all__ = ["BlockConfig", "BlockPairMatches", "ScaleLevel", "build_levels", "fixed_features",
+           "make_blocks", "match_block_pairs", "orientation_bin"]

@@ -1,0 +1,226 @@
+"""Slime (paper Sec. 3) on top of any base pipeline: blocks -> planes -> tiles -> epipolar -> refinement.
+
+Stages and where they live:
+    3.1 blocks and tiles ............ :mod:`.blocks`
+    3.2-3.3 block-pair planes ....... :mod:`.block_matching`
+    3.4 expansion and pruning ....... :func:`.planes.expand_planes`
+    3.5-3.7 tile sets, epipolar consistency, fusion, global orientation ... :mod:`.tiles`
+    3.8 tile refinement + global DTM  :mod:`.refine`
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..geometry.homography import project
+from ..geometry.ransac import HomographyRansacConfig
+from ..pipelines import BasePipeline
+from ..timing import StageTimer
+from .block_matching import BlockPairMatches, build_levels, match_block_pairs
+from .blocks import Block, BlockConfig, make_blocks, make_tiles
+from .planes import MatchTable, PlaneConfig, deduplicate, expand_planes
+from .refine import FlowGuide, global_dtm, match_tiles
+from .tiles import (
+    TileConfig,
+    TileSets,
+    best_sets_per_tile,
+    best_sets_per_tile_pair,
+    epipolar_consistency,
+    fuse_planes,
+    global_orientation_filter,
+    greedy_two_per_tile,
+    tile_sets,
+)
+
+logger = logging.getLogger("slime_match")
+
+
+@dataclass
+class SlimeConfig:
+    """Slime's parameters (paper defaults).
+
+    Attributes:
+        blocks: block/tile geometry (256 px, 32 px padding, stride 128 +- 24, scales 1, 2, 3).
+        ransac: the block-pair homography RANSAC (t_perp = 15 px, 100..10,000 iterations, p = 0.9).
+        planes: expansion thresholds (t_perp = 15 px, t_theta = 67.5 deg, t_sigma = 3).
+        tiles: tile-set logic (2 per tile pair, 4 per tile, t_xi = 9, t_ov = 1/3, 16 bins, 45 deg).
+        bins: orientation histogram bins of the block-pair refinement (16).
+        min_plane_matches: a block pair yields a plane only with at least this many RANSAC inliers
+            (ours: the paper does not state a minimum; 4 would be any minimal sample).
+        refine_tiles: run Sec. 3.8 (tile re-matching + global DTM); False stops at F^theta.
+        keep_stages: keep every stage's sets in the result (for ``slime viz`` / ``--save-stages``).
+    """
+
+    blocks: BlockConfig = field(default_factory=BlockConfig)
+    ransac: HomographyRansacConfig = field(default_factory=HomographyRansacConfig)
+    planes: PlaneConfig = field(default_factory=PlaneConfig)
+    tiles: TileConfig = field(default_factory=TileConfig)
+    bins: int = 16
+    min_plane_matches: int = 8
+    refine_tiles: bool = True
+    keep_stages: bool = False
+
+
+@dataclass
+class SlimeOutput:
+    """Final matches (original px), counts per stage, and optionally every stage's arrays."""
+
+    xy0: np.ndarray
+    xy1: np.ndarray
+    scores: np.ndarray
+    counts: dict[str, int]
+    stages: dict[str, np.ndarray] | None
+
+
+def _scaling(blocks: list[Block], index: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) maps original px -> scaled px of the blocks ``index`` (pixel-centre convention)."""
+    fx = np.array([blocks[i].fx for i in index])
+    fy = np.array([blocks[i].fy for i in index])
+    s = np.zeros((len(index), 3, 3))
+    s[:, 0, 0], s[:, 1, 1], s[:, 2, 2] = fx, fy, 1.0
+    s[:, 0, 2], s[:, 1, 2] = 0.5 * fx - 0.5, 0.5 * fy - 0.5
+    return s
+
+
+def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks1: list[Block]
+                             ) -> tuple[MatchTable, np.ndarray, np.ndarray]:
+    """Block-pair matches and homographies in original-image pixels (Sec. 3.4's reference frame).
+
+    Returns:
+        The match table (theta = 0 in image 0 and theta* of its plane in image 1, as forced by Sec. 3.3),
+        (L, 3, 3) homographies original image 0 -> original image 1, and (L,) plane sides.
+    """
+    s0 = _scaling(blocks0, bpm.pairs[:, 0])
+    s1 = _scaling(blocks1, bpm.pairs[:, 1])
+    h = np.linalg.inv(s1) @ bpm.H @ s0
+    pair = bpm.match_pair
+    f0 = np.sqrt(s0[:, 0, 0] * s0[:, 1, 1])[pair]
+    f1 = np.sqrt(s1[:, 0, 0] * s1[:, 1, 1])[pair]
+    xy0 = (bpm.xy0 + 0.5) / np.stack([s0[:, 0, 0], s0[:, 1, 1]], 1)[pair] - 0.5
+    xy1 = (bpm.xy1 + 0.5) / np.stack([s1[:, 0, 0], s1[:, 1, 1]], 1)[pair] - 0.5
+    table = MatchTable(xy0, xy1, np.zeros(len(pair)), bpm.theta[pair], bpm.scale0 / f0, bpm.scale1 / f1,
+                       np.ones(len(pair)), pair, bpm.scores)
+    side = np.ones(len(h))
+    for plane in range(len(h)):  # one small projection per plane
+        _, w = project(h[plane], xy0[pair == plane])
+        side[plane] = 1.0 if np.sum(np.sign(w)) >= 0 else -1.0
+    return table, h, side
+
+
+def select_planes(table: MatchTable, expanded, tiles0: list[Block], tiles1: list[Block], config: TileConfig
+                  ) -> dict[str, TileSets | np.ndarray | float]:
+    """Secs. 3.5-3.7: tile sets -> H* -> H -> M+ -> F-bar -> fused F^{l*} -> F^theta."""
+    w = table.weight
+    sets = tile_sets(table, expanded, tiles0, tiles1)
+    star = sets.subset(best_sets_per_tile_pair(sets, w, q=config.q_pair))
+    superset = star.subset(best_sets_per_tile(star, w, q=config.q_tile))
+    keep = epipolar_consistency(table, superset, t_perp=config.t_perp, t_xi=config.t_xi,
+                                min_union=config.min_union, chunk=config.chunk)
+    filtered = superset.restrict(keep)
+    fbar = filtered.subset(greedy_two_per_tile(filtered, w))
+    fused = fuse_planes(sets.restrict(keep), fbar, w, t_ov=config.t_ov)
+    ok, theta, theta_plus = global_orientation_filter(table, fused, bins=config.bins,
+                                                      t_theta_plus=config.t_theta_plus)
+    return {"sets": sets, "superset": superset, "keep": keep, "fbar": fbar, "fused": fused,
+            "ftheta": fused.subset(ok), "theta": theta[ok], "theta_plus": theta_plus}
+
+
+def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, config: SlimeConfig,
+              timer: StageTimer | None = None, seed: int = 0) -> SlimeOutput:
+    """Run Slime on two (H, W, 3) float images with ``pipeline`` as the base.
+
+    Returns:
+        SlimeOutput with matches in original pixels sorted by score (lower is better).
+    """
+    timer = timer or StageTimer()
+    (h0, w0), (h1, w1) = image0.shape[:2], image1.shape[:2]
+    blocks0, blocks1 = make_blocks(h0, w0, config.blocks), make_blocks(h1, w1, config.blocks)
+    tiles0, tiles1 = make_tiles(h0, w0, config.blocks), make_tiles(h1, w1, config.blocks)
+    with timer("features"):
+        levels0, levels1 = build_levels(pipeline, image0, blocks0), build_levels(pipeline, image1, blocks1)
+        (tile_level0,), (tile_level1,) = build_levels(pipeline, image0, tiles0), build_levels(pipeline, image1,
+                                                                                               tiles1)
+    with timer("block_pairs"):
+        bpm, counts = match_block_pairs(pipeline, levels0, levels1, blocks0, blocks1, config.ransac,
+                                        bins=config.bins, min_matches=config.min_plane_matches, seed=seed)
+    raw_table, h, side = block_planes_to_original(bpm, blocks0, blocks1)
+    table, _ = deduplicate(raw_table)
+    counts.update(block_matches=len(raw_table), block_matches_unique=len(table))
+    with timer("expansion"):
+        expanded = expand_planes(table, h, side, config.planes)
+    counts["expanded_memberships"] = int(expanded.nnz)
+    with timer("plane_selection"):
+        selected = select_planes(table, expanded, tiles0, tiles1, config.tiles)
+    ftheta = selected["ftheta"]
+    in_ftheta = ftheta.union()
+    counts.update(tile_sets=len(selected["sets"]), superset_H=len(selected["superset"]),
+                  epipolar_kept=int(selected["keep"].sum()), fbar_sets=len(selected["fbar"]),
+                  ftheta_sets=len(ftheta), ftheta_matches=int(in_ftheta.sum()))
+    guide_xy0, guide_xy1 = table.xy0[in_ftheta], table.xy1[in_ftheta]
+    tile_xy0 = tile_xy1 = np.zeros((0, 2))
+    tile_scores = np.zeros(0)
+    if config.refine_tiles and len(ftheta):
+        with timer("tile_refinement"):
+            guide = FlowGuide(guide_xy0, guide_xy1, config.planes.t_perp)
+            tile_xy0, tile_xy1, tile_scores = match_tiles(
+                pipeline, tile_level0, tile_level1, np.stack([ftheta.tile0, ftheta.tile1], 1),
+                selected["theta"], guide, [t.shape for t in tiles0], [t.box for t in tiles0],
+                [t.shape for t in tiles1], [t.box for t in tiles1], bins=config.tiles.bins)
+    counts["tile_matches"] = len(tile_xy0)
+    with timer("global_dtm"):
+        all0 = np.vstack([guide_xy0, tile_xy0])
+        all1 = np.vstack([guide_xy1, tile_xy1])
+        all_scores = np.concatenate([table.score[in_ftheta], tile_scores])
+        if config.refine_tiles:
+            xy0, xy1, scores = global_dtm(all0, all1, all_scores, (h0, w0), (h1, w1),
+                                          tile_level0.features.xy.cpu().numpy().astype(np.float64),
+                                          tile_level1.features.xy.cpu().numpy().astype(np.float64),
+                                          getattr(getattr(pipeline, "config", None), "dtm", None))
+        else:
+            order = np.argsort(all_scores, kind="stable")
+            xy0, xy1, scores = all0[order], all1[order], all_scores[order]
+    counts["final"] = len(xy0)
+    stages = None
+    if config.keep_stages:
+        stages = _stage_arrays(blocks0, blocks1, tiles0, tiles1, bpm, raw_table, table, h, expanded, selected,
+                               tile_xy0, tile_xy1, xy0, xy1)
+    return SlimeOutput(xy0, xy1, scores, counts, stages)
+
+
+def _boxes_original(blocks: list[Block]) -> np.ndarray:
+    """(n, 5) [x0, y0, x1, y1, scale_index] of block cores in original px."""
+    out = np.zeros((len(blocks), 5))
+    for i, b in enumerate(blocks):
+        lo = b.to_original(np.array([[b.core[0] - 0.5, b.core[1] - 0.5]]))[0]
+        hi = b.to_original(np.array([[b.core[2] - 0.5, b.core[3] - 0.5]]))[0]
+        out[i] = [*lo, *hi, b.scale_index]
+    return out
+
+
+def _sets_arrays(prefix: str, sets: TileSets) -> dict[str, np.ndarray]:
+    return {f"{prefix}_plane": sets.plane, f"{prefix}_tile0": sets.tile0, f"{prefix}_tile1": sets.tile1,
+            f"{prefix}_indptr": sets.indptr, f"{prefix}_indices": sets.indices}
+
+
+def _stage_arrays(blocks0, blocks1, tiles0, tiles1, bpm, raw_table, table, h, expanded, selected, tile_xy0,
+                  tile_xy1, xy0, xy1) -> dict[str, np.ndarray]:
+    """Every stage's sets as flat arrays (match sets index the rows of ``table_*``)."""
+    coo = expanded.tocoo()
+    out = {
+        "blocks0": _boxes_original(blocks0), "blocks1": _boxes_original(blocks1),
+        "tiles0": _boxes_original(tiles0), "tiles1": _boxes_original(tiles1),
+        "planes_pairs": bpm.pairs, "planes_H": h, "planes_theta": bpm.theta,
+        "block_matches_xy0": raw_table.xy0, "block_matches_xy1": raw_table.xy1,
+        "block_matches_plane": raw_table.source,
+        "table_xy0": table.xy0, "table_xy1": table.xy1, "table_weight": table.weight,
+        "expanded_plane": coo.row.astype(np.int64), "expanded_match": coo.col.astype(np.int64),
+        "epipolar_keep": selected["keep"], "ftheta_theta": selected["theta"],
+        "theta_plus": np.array(selected["theta_plus"]),
+        "tile_matches_xy0": tile_xy0, "tile_matches_xy1": tile_xy1, "final_xy0": xy0, "final_xy1": xy1,
+    }
+    for name in ("superset", "fbar", "ftheta"):
+        out.update(_sets_arrays(name, selected[name]))
+    return out
