@@ -14,6 +14,7 @@ Everything is sparse: adjacency as sorted int64 pair keys, point location with `
 from __future__ import annotations
 
 import logging
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -185,7 +186,7 @@ def _near_pairs(unit_vertex: np.ndarray, alive: np.ndarray, mesh: _Mesh, n_units
     return np.sort(keys[ua != ub])
 
 
-def _greedy_survivors(a: np.ndarray, b: np.ndarray, rank: np.ndarray, alive: np.ndarray) -> np.ndarray:
+def _greedy_survivors(a: np.ndarray, b: np.ndarray, alive: np.ndarray) -> np.ndarray:
     """Units surviving the walk by rank where each surviving unit removes its inconsistent neighbours.
 
     Vectorised in rounds with the same result as the sequential walk: a unit dies once a better-ranked
@@ -193,7 +194,7 @@ def _greedy_survivors(a: np.ndarray, b: np.ndarray, rank: np.ndarray, alive: np.
 
     Args:
         a, b: (E,) inconsistent unit pairs with rank[a] < rank[b] (a can remove b).
-        rank: (U,) position of each unit in the walk; alive: (U,) units taking part.
+        alive: (U,) units taking part.
     """
     state = np.where(alive, 0, -1).astype(np.int8)  # 0 undecided, 1 survives, -1 removed / absent
     while True:
@@ -328,61 +329,92 @@ def dtm_filter(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0: tupl
     (vxy0, v0), (vxy1, v1) = _vertices(xy0, sizes[0]), _vertices(xy1, sizes[1])
     unit_keys, unit_of = np.unique(v0 * len(vxy1) + v1, return_inverse=True)
     unit_of = unit_of.reshape(-1)
-    n_units = len(unit_keys)
-    uv = (unit_keys // len(vxy1), unit_keys % len(vxy1))
-    uscore = np.full(n_units, np.inf)
+    uscore = np.full(len(unit_keys), np.inf)
     np.minimum.at(uscore, unit_of, scores)
-    vxy = (vxy0, vxy1)
     unmatched = (_prepare_unmatched(unmatched0, sizes[0]), _prepare_unmatched(unmatched1, sizes[1]))
+    with ThreadPoolExecutor(2) as pool:
+        units = _Units((unit_keys // len(vxy1), unit_keys % len(vxy1)), uscore, (vxy0, vxy1), sizes,
+                       unmatched, cfg, pool)
+        removed_at, iterations = units.contract()
+        restored = units.expand(removed_at, iterations)
+    log.debug("DTM: %d contraction iterations, %d of %d units kept (%d restored)", iterations,
+              units.alive.sum(), len(uscore), restored.sum())
+    return DTMResult(units.alive[unit_of], removed_at[unit_of], restored[unit_of])
 
-    def meshes(alive: np.ndarray) -> tuple[_Mesh, _Mesh]:
-        return tuple(_triangulate(np.unique(uv[s][alive]), vxy[s], sizes[s], unmatched[s], cfg) for s in (0, 1))
 
-    alive = np.ones(n_units, bool)
-    removed_at = np.full(n_units, -1, np.int64)
-    iteration = 0
-    while iteration < cfg.max_iterations and alive.sum() > 0:
-        mesh = meshes(alive)
-        near0, near1 = (_near_pairs(uv[s], alive, mesh[s], n_units) for s in (0, 1))
-        consistent = np.intersect1d(near0, near1, assume_unique=True)
-        inconsistent = np.setxor1d(near0, near1, assume_unique=True)
-        n_consistent = np.bincount(consistent // n_units, minlength=n_units)
-        rank = np.empty(n_units, np.int64)
-        rank[np.lexsort((-n_consistent, uscore))] = np.arange(n_units)
-        a, b = inconsistent // n_units, inconsistent % n_units
-        better = rank[a] < rank[b]
-        survive = _greedy_survivors(a[better], b[better], rank, alive)
-        ca, cb = consistent // n_units, consistent % n_units
-        supported = np.zeros(n_units, bool)
-        supported[ca[survive[ca] & survive[cb]]] = True
-        new_alive = survive & supported
-        removed = alive & ~new_alive
-        if not removed.any():
-            break
-        removed_at[removed] = iteration
-        alive = new_alive
-        iteration += 1
-    log.debug("DTM contraction: %d iterations, %d of %d units kept", iteration, alive.sum(), n_units)
+class _Units:
+    """The distinct (vertex 0, vertex 1) pairs of the candidates and their alive flags.
 
-    restored = np.zeros(n_units, bool)
-    for it in range(iteration - 1, -1, -1):
-        cand = np.flatnonzero((removed_at >= it) & ~alive)
-        if not alive.any() or not len(cand):
-            continue
-        mesh = meshes(alive)
-        ok = np.ones(len(cand), bool)
-        for s in (0, 1):
-            o = 1 - s
-            rep = _representatives(uv[s], uscore, alive, len(vxy[s]))
-            rep_dst = np.zeros_like(vxy[s])
-            has = rep >= 0
-            rep_dst[has] = vxy[o][uv[o][rep[has]]]
-            ok &= _transfer_ok(mesh[s], vxy[s], rep_dst, vxy[s][uv[s][cand]], vxy[o][uv[o][cand]],
-                               cfg.inside_tolerance)
-        restored[cand[ok]] = True
-        alive[cand[ok]] = True
-    log.debug("DTM expansion: %d units restored, %d kept", restored.sum(), alive.sum())
-    return DTMResult(alive[unit_of], removed_at[unit_of], restored[unit_of])
+    Attributes:
+        uv: per image, (U,) vertex id of each unit; score: (U,) best score of the unit's matches;
+        vxy: per image, (V, 2) vertex positions; alive: (U,) currently kept units.
+    """
+
+    def __init__(self, uv, score, vxy, sizes, unmatched, cfg: DTMConfig, pool: ThreadPoolExecutor) -> None:
+        self.uv, self.score, self.vxy, self.sizes = uv, score, vxy, sizes
+        self.unmatched, self.cfg, self.pool = unmatched, cfg, pool
+        self.alive = np.ones(len(score), bool)
+        self._cache: tuple[bytes, tuple[_Mesh, _Mesh]] | None = None
+
+    def meshes(self) -> tuple[_Mesh, _Mesh]:
+        """Both images' meshes of the alive units, built in parallel (Qhull releases the GIL); the last
+        pair is reused while the alive set does not change."""
+        key = np.packbits(self.alive).tobytes()
+        if self._cache is None or self._cache[0] != key:
+            alive = self.alive.copy()
+            built = tuple(self.pool.map(lambda s: _triangulate(
+                np.unique(self.uv[s][alive]), self.vxy[s], self.sizes[s], self.unmatched[s], self.cfg), (0, 1)))
+            self._cache = (key, built)
+        return self._cache[1]
+
+    def contract(self) -> tuple[np.ndarray, int]:
+        """Stage 1. Returns (U,) removal iteration (-1 never) and the number of removing iterations."""
+        n_units = len(self.score)
+        removed_at = np.full(n_units, -1, np.int64)
+        iteration = 0
+        while iteration < self.cfg.max_iterations and self.alive.any():
+            mesh = self.meshes()
+            near0, near1 = (_near_pairs(self.uv[s], self.alive, mesh[s], n_units) for s in (0, 1))
+            consistent = np.intersect1d(near0, near1, assume_unique=True)
+            inconsistent = np.setxor1d(near0, near1, assume_unique=True)
+            n_consistent = np.bincount(consistent // n_units, minlength=n_units)
+            rank = np.empty(n_units, np.int64)
+            rank[np.lexsort((-n_consistent, self.score))] = np.arange(n_units)
+            a, b = inconsistent // n_units, inconsistent % n_units
+            better = rank[a] < rank[b]
+            survive = _greedy_survivors(a[better], b[better], self.alive)
+            ca, cb = consistent // n_units, consistent % n_units
+            supported = np.zeros(n_units, bool)
+            supported[ca[survive[ca] & survive[cb]]] = True
+            removed = self.alive & ~(survive & supported)
+            if not removed.any():
+                break
+            removed_at[removed] = iteration
+            self.alive &= ~removed
+            iteration += 1
+        return removed_at, iteration
+
+    def expand(self, removed_at: np.ndarray, iterations: int) -> np.ndarray:
+        """Stage 2, from the last removal iteration to the first: a unit removed at or after it returns
+        when both images' kept triangulations predict its position. Returns (U,) restored flags."""
+        restored = np.zeros(len(self.score), bool)
+        for it in range(iterations - 1, -1, -1):
+            cand = np.flatnonzero((removed_at >= it) & ~self.alive)
+            if not self.alive.any() or not len(cand):
+                continue
+            mesh = self.meshes()
+            ok = np.ones(len(cand), bool)
+            for s in (0, 1):
+                o = 1 - s
+                rep = _representatives(self.uv[s], self.score, self.alive, len(self.vxy[s]))
+                rep_dst = np.zeros_like(self.vxy[s])
+                has = rep >= 0
+                rep_dst[has] = self.vxy[o][self.uv[o][rep[has]]]
+                ok &= _transfer_ok(mesh[s], self.vxy[s], rep_dst, self.vxy[s][self.uv[s][cand]],
+                                   self.vxy[o][self.uv[o][cand]], self.cfg.inside_tolerance)
+            restored[cand[ok]] = True
+            self.alive[cand[ok]] = True
+        return restored
 
 
 def _representatives(v_this: np.ndarray, uscore: np.ndarray, alive: np.ndarray,

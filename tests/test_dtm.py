@@ -1,0 +1,135 @@
+"""DTM on synthetic homography data with exact ground truth, tiny inputs and duplicates."""
+
+import numpy as np
+import pytest
+from scipy.spatial import Delaunay
+
+from slime_match.errors import ConfigError
+from slime_match.matching import dtm as dtm_module
+from slime_match.matching.dtm import DTMConfig, DTMResult, dtm_filter
+
+SIZE = (600, 800)  # (H, W)
+
+
+def homography_scene(n_in=1000, out_frac=0.3, n_unmatched=2000, noise=0.7, seed=0):
+    """Inliers of a random homography (+ Gaussian noise), uniform outliers, unmatched keypoints."""
+    g = np.random.default_rng(seed)
+    h, w = SIZE
+    corners = np.array([[0, 0], [w, 0], [w, h], [0, h]], float)
+    moved = corners + g.uniform(-0.15, 0.15, (4, 2)) * [w, h]
+    a = []
+    for (x, y), (u, v) in zip(corners, moved):
+        a.append([x, y, 1, 0, 0, 0, -u * x, -u * y, -u])
+        a.append([0, 0, 0, x, y, 1, -v * x, -v * y, -v])
+    hom = np.linalg.svd(np.array(a))[2][-1].reshape(3, 3)
+    p0 = g.uniform(0, [w, h], (5 * n_in, 2))
+    q = np.c_[p0, np.ones(len(p0))] @ hom.T
+    p1 = q[:, :2] / q[:, 2:]
+    inside = ((p1 >= 0) & (p1 < [w, h])).all(1)
+    p0, p1 = p0[inside][:n_in], p1[inside][:n_in] + g.normal(0, noise, (n_in, 2))
+    n_out = int(round(n_in * out_frac / (1 - out_frac)))
+    xy0 = np.r_[p0, g.uniform(0, [w, h], (n_out, 2))]
+    xy1 = np.r_[p1, g.uniform(0, [w, h], (n_out, 2))]
+    inlier = np.r_[np.ones(n_in, bool), np.zeros(n_out, bool)]
+    perm = g.permutation(len(xy0))
+    unmatched = [g.uniform(0, [w, h], (n_unmatched, 2)) for _ in range(2)]
+    return xy0[perm], xy1[perm], g.uniform(0, 1, len(xy0)), inlier[perm], unmatched
+
+
+def check_result(res: DTMResult, k: int) -> None:
+    assert res.keep.shape == res.removed_at.shape == res.restored.shape == (k,)
+    assert res.keep.dtype == bool and res.restored.dtype == bool and res.removed_at.dtype == np.int64
+    assert np.all(res.removed_at >= -1)
+    # restored <=> removed in contraction and kept at the end
+    np.testing.assert_array_equal(res.restored, res.keep & (res.removed_at >= 0))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_synthetic_homography_inliers_kept_outliers_removed(seed):
+    xy0, xy1, scores, inlier, (u0, u1) = homography_scene(seed=seed)
+    res = dtm_filter(xy0, xy1, scores, SIZE, SIZE, u0, u1)
+    check_result(res, len(xy0))
+    assert res.keep[inlier].mean() >= 0.90
+    assert res.keep[~inlier].mean() < 0.01
+    assert res.restored.any() and (res.removed_at >= 1).any()  # both stages did work
+
+
+def test_without_unmatched_and_permutation_invariance():
+    xy0, xy1, scores, inlier, _ = homography_scene(n_in=400, seed=2)
+    res = dtm_filter(xy0, xy1, scores, SIZE, SIZE)
+    assert res.keep[inlier].mean() >= 0.90 and res.keep[~inlier].mean() < 0.01
+    perm = np.random.default_rng(0).permutation(len(xy0))
+    res_p = dtm_filter(xy0[perm], xy1[perm], scores[perm], SIZE, SIZE)
+    np.testing.assert_array_equal(res_p.keep, res.keep[perm])
+    np.testing.assert_array_equal(res_p.removed_at, res.removed_at[perm])
+
+
+@pytest.mark.parametrize("k", [0, 1, 2, 3])
+def test_tiny_inputs(k):
+    g = np.random.default_rng(k)
+    xy = g.uniform(0, 100, (k, 2))
+    res = dtm_filter(xy, xy + 5, g.uniform(size=k), (120, 140), (120, 140), g.uniform(0, 100, (7, 2)),
+                     np.zeros((0, 2)))
+    check_result(res, k)
+
+
+def test_collinear_and_degenerate_inputs():
+    line = np.c_[np.arange(0, 200, 10.0), np.full(20, 50.0)]
+    res = dtm_filter(line, line * 0.5 + 3, np.arange(20.0), (100, 200), (100, 200), line + [0, 20], line)
+    check_result(res, 20)
+    # Coordinates outside the image and all matches on one point.
+    res = dtm_filter(np.array([[-5.0, 300], [1e4, 2]]), np.zeros((2, 2)), [0.1, 0.2], (50, 60), (50, 60))
+    check_result(res, 2)
+    same = np.full((6, 2), 7.0)
+    check_result(dtm_filter(same, same, np.ones(6), (20, 20), (20, 20)), 6)
+
+
+def test_duplicated_positions_share_fate():
+    xy0, xy1, scores, inlier, (u0, u1) = homography_scene(n_in=600, seed=3)
+    g = np.random.default_rng(1)
+    dup = g.choice(len(xy0), 400, replace=False)
+    xy0d, xy1d = np.r_[xy0, xy0[dup]], np.r_[xy1, xy1[dup]]
+    sd, inl = np.r_[scores, g.uniform(0, 1, len(dup))], np.r_[inlier, inlier[dup]]
+    # many-to-many: extra wrong partners for some keypoints of image 0 (one vertex, several matches)
+    wrong = g.choice(len(xy0), 150, replace=False)
+    xy0d, xy1d = np.r_[xy0d, xy0[wrong]], np.r_[xy1d, g.uniform(0, [SIZE[1], SIZE[0]], (150, 2))]
+    sd, inl = np.r_[sd, g.uniform(0, 1, 150)], np.r_[inl, np.zeros(150, bool)]
+    res = dtm_filter(xy0d, xy1d, sd, SIZE, SIZE, u0, u1)
+    check_result(res, len(xy0d))
+    np.testing.assert_array_equal(res.keep[len(xy0):len(xy0) + len(dup)], res.keep[dup])
+    assert res.keep[inl].mean() >= 0.90 and res.keep[~inl].mean() < 0.01
+
+
+def test_config_validation():
+    with pytest.raises(ConfigError):
+        dtm_filter(np.zeros((1, 2)), np.zeros((1, 2)), [0.0], (10, 10), (10, 10), config={"nope": 1})
+    with pytest.raises(ConfigError):
+        DTMConfig(border_spacing=0)
+    with pytest.raises(ValueError):
+        dtm_filter(np.zeros((2, 2)), np.zeros((1, 2)), [0.0], (10, 10), (10, 10))
+
+
+def test_greedy_survivors_matches_sequential_walk():
+    g = np.random.default_rng(0)
+    n = 300
+    pairs = np.unique(np.sort(g.integers(0, n, (900, 2)), 1), axis=0)
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    rank = g.permutation(n)
+    a = np.where(rank[pairs[:, 0]] < rank[pairs[:, 1]], pairs[:, 0], pairs[:, 1])
+    b = np.where(rank[pairs[:, 0]] < rank[pairs[:, 1]], pairs[:, 1], pairs[:, 0])
+    alive = g.uniform(size=n) < 0.9
+    ref = alive.copy()
+    for u in np.argsort(rank):
+        if ref[u]:
+            ref[b[(a == u) & alive[b]]] = False
+    sel = alive[a] & alive[b]
+    np.testing.assert_array_equal(dtm_module._greedy_survivors(a[sel], b[sel], alive), ref)
+
+
+def test_locate_matches_find_simplex():
+    g = np.random.default_rng(0)
+    pts = np.unique(np.rint(g.uniform(0, 300, (500, 2))), axis=0)
+    tri = Delaunay(np.r_[pts, [[-1, -1], [301, -1], [301, 301], [-1, 301]]])
+    q = g.uniform(-0.5, 300.5, (2000, 2))
+    np.testing.assert_array_equal(dtm_module._locate(tri, q), tri.find_simplex(q))
+    assert np.all(dtm_module._locate(tri, np.array([[-50.0, 0.0], [400.0, 400.0]])) == -1)
