@@ -99,14 +99,14 @@ def detect_harrisz(image: torch.Tensor, config: HarrisZConfig | None = None) -> 
         logger.debug("HarrisZ+: image %dx%d too small for the filters, no keypoints", width, height)
         return _empty_keypoints(device)
 
-    gradients: dict[int, tuple[torch.Tensor, torch.Tensor]] = {}
+    gradients: dict[int, tuple[torch.Tensor, ...]] = {}
     parts = []
     for k in range(cfg.num_levels):
         factor = 2 if k < cfg.upsampled_levels else 1
         if factor not in gradients:
             work = _lanczos_upsample2(img) if factor == 2 else img
             gradients[factor] = _gradient_fields(work, cfg.color)
-        parts.append(_detect_level(*gradients[factor], k, factor, cfg))
+        parts.append(_detect_level(gradients[factor], k, factor, cfg))
     xy, ellipse, response, level = (np.concatenate(a) for a in zip(*parts))
 
     upsampled = np.flatnonzero(level < cfg.upsampled_levels)
@@ -186,34 +186,39 @@ def _lanczos_upsample2_torch(image: torch.Tensor) -> torch.Tensor:
 
 
 def _central_gradient(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Central differences of (C, H, W) with replicated borders; returns (d/dx, d/dy), each (C, H, W)."""
-    p = F.pad(x[None], (1, 1, 1, 1), mode="replicate")[0]
-    return 0.5 * (p[:, 1:-1, 2:] - p[:, 1:-1, :-2]), 0.5 * (p[:, 2:, 1:-1] - p[:, :-2, 1:-1])
+    """Central differences of an (H, W) image with replicated borders; returns d/dx and d/dy, each (H, W)."""
+    gx, gy = torch.empty_like(x), torch.empty_like(x)
+    torch.sub(x[:, 2:], x[:, :-2], out=gx[:, 1:-1])
+    torch.sub(x[:, 1], x[:, 0], out=gx[:, 0])
+    torch.sub(x[:, -1], x[:, -2], out=gx[:, -1])
+    torch.sub(x[2:], x[:-2], out=gy[1:-1])
+    torch.sub(x[1], x[0], out=gy[0])
+    torch.sub(x[-1], x[-2], out=gy[-1])
+    return gx.mul_(0.5), gy.mul_(0.5)
 
 
-def _gradient_fields(image: torch.Tensor, color: bool) -> tuple[torch.Tensor, torch.Tensor]:
-    """Grey gradient (Harris tensor) and mask gradient ("best" colour field or grey) of one working image.
+def _gradient_fields(image: torch.Tensor, color: bool) -> tuple[torch.Tensor, ...]:
+    """Grey gradient (for the Harris tensor) and mask gradient ("best" colour field, or grey) of an image.
 
     Args:
         image: (C, H, W) with C in {1, 3}.
         color: build the colour best field when C == 3.
 
     Returns:
-        grey_grad (2, H, W) and mask_grad (2, H, W): x and y components.
+        gx, gy, bx, by: (H, W) each; bx, by are gx, gy themselves when there is no colour field.
     """
     if image.shape[0] == 3:
-        weights = torch.tensor(_GREY_WEIGHTS, dtype=image.dtype, device=image.device)
-        grey = (image * weights[:, None, None]).sum(0, keepdim=True)
+        r, g, b = _GREY_WEIGHTS
+        grey = image[0] * r + image[1] * g + image[2] * b
     else:
-        grey = image
+        grey = image[0]
     gx, gy = _central_gradient(grey)
-    grey_grad = torch.cat((gx, gy))
     if not (color and image.shape[0] == 3):
-        return grey_grad, grey_grad
-    mx, my = _central_gradient(image.amax(0, keepdim=True))
-    max_grad = torch.cat((mx, my))
-    best = torch.where(max_grad.abs() > grey_grad.abs(), max_grad, grey_grad)
-    return grey_grad, best
+        return gx, gy, gx, gy
+    mx, my = _central_gradient(image.amax(0))
+    bx = torch.where(mx.abs() > gx.abs(), mx, gx)
+    by = torch.where(my.abs() > gy.abs(), my, gy)
+    return gx, gy, bx, by
 
 
 def _gaussian_kernel(sigma: float) -> np.ndarray:
@@ -223,21 +228,22 @@ def _gaussian_kernel(sigma: float) -> np.ndarray:
     return k / k.sum()
 
 
-def _gaussian_blur(x: torch.Tensor, sigma: float) -> torch.Tensor:
-    """Separable Gaussian smoothing of (C, H, W) with reflected borders (``reflect``, i.e. BORDER_REFLECT_101).
+def _gaussian_blur(channels: list[torch.Tensor], sigma: float) -> list[torch.Tensor]:
+    """Separable Gaussian smoothing of (H, W) images with reflected borders (BORDER_REFLECT_101).
 
-    On CPU this calls ``cv2.sepFilter2D`` per channel (about 10x faster than torch here); elsewhere it runs
+    On CPU this calls ``cv2.sepFilter2D`` per image (about 10x faster than torch here); elsewhere it runs
     torch shifted multiply-adds (much faster than single-channel conv2d). Both give the same result.
     """
     k = _gaussian_kernel(sigma)
-    if x.device.type == "cpu":
-        src = x.detach().contiguous().numpy()
+    if channels[0].device.type == "cpu":
         k32 = k.astype(np.float32)
-        out = np.empty_like(src)
-        for ch in range(src.shape[0]):
-            cv2.sepFilter2D(src[ch], -1, k32, k32, dst=out[ch], borderType=cv2.BORDER_REFLECT_101)
-        return torch.from_numpy(out)
-    return _gaussian_blur_torch(x, k)
+        return [
+            torch.from_numpy(
+                cv2.sepFilter2D(ch.contiguous().numpy(), -1, k32, k32, borderType=cv2.BORDER_REFLECT_101)
+            )
+            for ch in channels
+        ]
+    return list(_gaussian_blur_torch(torch.stack(channels), k).unbind(0))
 
 
 def _gaussian_blur_torch(x: torch.Tensor, kernel: np.ndarray) -> torch.Tensor:
@@ -255,20 +261,37 @@ def _gaussian_blur_torch(x: torch.Tensor, kernel: np.ndarray) -> torch.Tensor:
     return out
 
 
-def _zscore(x: torch.Tensor) -> torch.Tensor:
-    std = x.std()
-    if not bool(std > 0):
-        return torch.zeros_like(x)
-    return (x - x.mean()) / std
+def _max_filter(x: torch.Tensor, window: int) -> torch.Tensor:
+    """Maximum over the window x window neighbourhood of each pixel of (H, W); outside pixels are ignored."""
+    if x.device.type == "cpu":
+        return torch.from_numpy(cv2.dilate(x.contiguous().numpy(), np.ones((window, window), np.uint8)))
+    return _max_filter_torch(x, window)
+
+
+def _max_filter_torch(x: torch.Tensor, window: int) -> torch.Tensor:
+    """Torch version of :func:`_max_filter` (separable max pooling)."""
+    h = window // 2
+    pooled = F.max_pool2d(x[None, None], (1, window), stride=1, padding=(0, h))
+    return F.max_pool2d(pooled, (window, 1), stride=1, padding=(h, 0))[0, 0]
+
+
+def _zscore_difference(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    """z(x) - z(y) with z the z-score over the whole image (0 for a constant image); overwrites x."""
+    std_x, mean_x = torch.std_mean(x)
+    std_y, mean_y = torch.std_mean(y)
+    out = x.sub_(mean_x).div_(std_x) if bool(std_x > 0) else x.zero_()
+    if bool(std_y > 0):
+        out.sub_((y - mean_y).div_(std_y))
+    return out
 
 
 def _detect_level(
-    grey_grad: torch.Tensor, mask_grad: torch.Tensor, k: int, factor: int, cfg: HarrisZConfig
+    fields_: tuple[torch.Tensor, ...], k: int, factor: int, cfg: HarrisZConfig
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Keypoints of one scale level.
 
     Args:
-        grey_grad, mask_grad: (2, h, w) raw gradients of the working image (original or 2x).
+        fields_: raw gradients (gx, gy, bx, by) of the working image (original or 2x), (h, w) each.
         k: level index; integration sigma sqrt(2)^k and derivative sigma sqrt(2)^(k-1) in original pixels.
         factor: working-image scale (2 on upsampled levels, else 1).
         cfg: detector parameters.
@@ -278,39 +301,36 @@ def _detect_level(
     """
     s_i = _SQRT2**k
     s_d = s_i / _SQRT2
-    same_field = mask_grad is grey_grad
-    fields_ = grey_grad if same_field else torch.cat((grey_grad, mask_grad))
-    smooth = _gaussian_blur(fields_, s_d * factor)
+    gx, gy, bx, by = fields_
+    same_field = bx is gx
+    smooth = _gaussian_blur([gx, gy] if same_field else [gx, gy, bx, by], s_d * factor)
     gx, gy = smooth[0], smooth[1]
     bx, by = (gx, gy) if same_field else (smooth[2], smooth[3])
-    magnitude = torch.sqrt(bx * bx + by * by)
-    mask = _gaussian_blur((magnitude > magnitude.mean()).to(magnitude.dtype)[None], s_d * factor)[0]
-    dx, dy = gx * mask, gy * mask
-    tensor = _gaussian_blur(torch.stack((dx * dx, dy * dy, dx * dy)), s_i * factor)
-    a, b, c = tensor[0], tensor[1], tensor[2]
-    response = _zscore(a * b - c * c) - _zscore((a + b) ** 2)
+    magnitude = torch.hypot(bx, by)
+    mask = _gaussian_blur([(magnitude > magnitude.mean()).to(magnitude.dtype)], s_d * factor)[0]
+    dx, dy = gx.mul_(mask), gy.mul_(mask)
+    a, b, c = _gaussian_blur([dx * dx, dy * dy, dx * dy], s_i * factor)
+    response = _zscore_difference(torch.addcmul(a * b, c, c, value=-1.0), (a + b).square_())
 
     ys, xs = _unique_peaks(response, mask, cfg.peak_window, cfg.mask_threshold)
     if len(ys) == 0:
         return _empty_level()
-    ys_t = torch.from_numpy(ys).to(response.device)
-    xs_t = torch.from_numpy(xs).to(response.device)
     values = torch.stack(
         (
-            response[ys_t, xs_t],
-            response[ys_t, xs_t - 1],
-            response[ys_t, xs_t + 1],
-            response[ys_t - 1, xs_t],
-            response[ys_t + 1, xs_t],
-            a[ys_t, xs_t],
-            b[ys_t, xs_t],
-            c[ys_t, xs_t],
+            response[ys, xs],
+            response[ys, xs - 1],
+            response[ys, xs + 1],
+            response[ys - 1, xs],
+            response[ys + 1, xs],
+            a[ys, xs],
+            b[ys, xs],
+            c[ys, xs],
         ),
         dim=1,
     ).double().cpu().numpy()
 
     order = np.argsort(-values[:, 0], kind="stable")
-    peaks_xy = np.stack((xs, ys), axis=1).astype(np.float64)
+    peaks_xy = torch.stack((xs, ys), dim=1).cpu().numpy().astype(np.float64)
     keep = order[_greedy_keep(peaks_xy[order], math.ceil(3.0 * s_d * factor))]
     values, peaks_xy = values[keep], peaks_xy[keep]
 
@@ -334,25 +354,24 @@ def _empty_level() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
 
 def _unique_peaks(
     response: torch.Tensor, mask: torch.Tensor, window: int, mask_threshold: float
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Pixels that are the unique maximum of their window, with response > 0 and mask > threshold.
 
-    Peaks whose window leaves the image are ignored. Returns row and column indices (int64 NumPy arrays).
+    Peaks whose window leaves the image are ignored. Returns row and column indices (int64, same device).
     """
     h = window // 2
     height, width = response.shape
-    pooled = F.max_pool2d(response[None, None], (1, window), stride=1, padding=(0, h))
-    pooled = F.max_pool2d(pooled, (window, 1), stride=1, padding=(h, 0))[0, 0]
-    candidate = (response == pooled) & (response > 0) & (mask > mask_threshold)
-    inner = torch.zeros_like(candidate)
-    inner[h : height - h, h : width - h] = True
-    ys, xs = torch.nonzero(candidate & inner, as_tuple=True)
-    if len(ys) == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    inner = (slice(h, height - h), slice(h, width - h))
+    core = response[inner]
+    candidate = core == _max_filter(response, window)[inner]
+    candidate &= core > 0
+    candidate &= mask[inner] > mask_threshold
+    ys, xs = torch.nonzero(candidate, as_tuple=True)
+    ys, xs = ys + h, xs + h
     offsets = torch.arange(-h, h + 1, device=response.device)
     patch = response[(ys[:, None] + offsets)[:, :, None], (xs[:, None] + offsets)[:, None, :]]
     unique = (patch == response[ys, xs][:, None, None]).flatten(1).sum(1) == 1
-    return ys[unique].cpu().numpy(), xs[unique].cpu().numpy()
+    return ys[unique], xs[unique]
 
 
 def _ellipse_from_tensor(
