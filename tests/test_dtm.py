@@ -1,11 +1,15 @@
 """DTM on synthetic homography data with exact ground truth, tiny inputs and duplicates."""
 
+import cv2
 import numpy as np
 import pytest
+import torch
+from conftest import require
 from scipy.spatial import Delaunay
 
 from slime_match.errors import ConfigError
 from slime_match.matching import dtm as dtm_module
+from slime_match.matching.blob import blob_match
 from slime_match.matching.dtm import DTMConfig, DTMResult, dtm_filter
 
 SIZE = (600, 800)  # (H, W)
@@ -27,7 +31,7 @@ def homography_scene(n_in=1000, out_frac=0.3, n_unmatched=2000, noise=0.7, seed=
     p1 = q[:, :2] / q[:, 2:]
     inside = ((p1 >= 0) & (p1 < [w, h])).all(1)
     p0, p1 = p0[inside][:n_in], p1[inside][:n_in] + g.normal(0, noise, (n_in, 2))
-    n_out = int(round(n_in * out_frac / (1 - out_frac)))
+    n_out = round(n_in * out_frac / (1 - out_frac))
     xy0 = np.r_[p0, g.uniform(0, [w, h], (n_out, 2))]
     xy1 = np.r_[p1, g.uniform(0, [w, h], (n_out, 2))]
     inlier = np.r_[np.ones(n_in, bool), np.zeros(n_out, bool)]
@@ -133,3 +137,24 @@ def test_locate_matches_find_simplex():
     q = g.uniform(-0.5, 300.5, (2000, 2))
     np.testing.assert_array_equal(dtm_module._locate(tri, q), tri.find_simplex(q))
     assert np.all(dtm_module._locate(tri, np.array([[-50.0, 0.0], [400.0, 400.0]])) == -1)
+
+
+def test_real_pair_blob_then_dtm(data_dir):
+    """Oxford graf 1-2 with OpenCV RootSIFT: DTM keeps the correct Blob candidates and drops the rest."""
+    folder = require(data_dir / "oxford_graf")
+    hom = np.loadtxt(folder / "H1to2p")
+    feats = []
+    for name in ("img1.png", "img2.png"):
+        img = cv2.imread(str(folder / name), cv2.IMREAD_GRAYSCALE)
+        kp, desc = cv2.SIFT_create(3000).detectAndCompute(img, None)
+        desc = np.sqrt(desc / np.maximum(desc.sum(1, keepdims=True), 1e-9))
+        feats.append((np.array([p.pt for p in kp]), torch.from_numpy(desc).float(), img.shape))
+    (xy0, d0, size0), (xy1, d1, size1) = feats
+    cand = blob_match(d0, d1, torch.from_numpy(xy0), torch.from_numpy(xy1))
+    proj = np.c_[xy0[cand.idx0], np.ones(len(cand))] @ hom.T
+    correct = np.linalg.norm(proj[:, :2] / proj[:, 2:] - xy1[cand.idx1], axis=1) < 3
+    unmatched = [np.delete(xy, np.unique(idx), 0) for xy, idx in ((xy0, cand.idx0), (xy1, cand.idx1))]
+    res = dtm_filter(xy0[cand.idx0], xy1[cand.idx1], cand.scores, size0, size1, *unmatched)
+    assert correct.sum() > 500 and correct.mean() < 0.5
+    assert res.keep[correct].mean() > 0.9
+    assert correct[res.keep].mean() > 0.8
