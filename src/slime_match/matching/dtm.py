@@ -5,8 +5,11 @@ ALGORITHMS.md section 4. Matches are first grouped into *units*, the distinct pa
 vertex or on two Delaunay-adjacent non-border vertices; they are consistent when near in both images and
 inconsistent when near in exactly one. Contraction repeatedly removes, walking the units by rank, the
 inconsistent neighbours of every surviving unit, then drops survivors without a surviving consistent
-neighbour. Expansion puts back, from the last removal iteration to the first, the units whose position is
-predicted by the kept triangulation in both directions.
+neighbour. Expansion walks the removal iterations from the last to the first; at each it re-triangulates
+the kept units and puts back every unit removed at that iteration or later (so a unit rejected by a coarse
+mesh gets another chance on the denser ones) whose position is predicted in both directions: its point
+lies in the image of the kept triangle containing its other point (border triangles: border corners
+mapped by the local affine fit of the nearest kept vertex's neighbourhood).
 
 Everything is sparse: adjacency as sorted int64 pair keys, point location with ``Delaunay.find_simplex``.
 """
@@ -347,10 +350,14 @@ class _Units:
 
     Attributes:
         uv: per image, (U,) vertex id of each unit; score: (U,) best score of the unit's matches;
-        vxy: per image, (V, 2) vertex positions; alive: (U,) currently kept units.
+        vxy: per image, (V, 2) vertex positions; sizes: per image (H, W); unmatched: per image (N, 2)
+        rounded unmatched keypoints or None; alive: (U,) currently kept units.
     """
 
-    def __init__(self, uv, score, vxy, sizes, unmatched, cfg: DTMConfig, pool: ThreadPoolExecutor) -> None:
+    def __init__(self, uv: tuple[np.ndarray, np.ndarray], score: np.ndarray, vxy: tuple[np.ndarray, np.ndarray],
+                 sizes: tuple[tuple[int, int], tuple[int, int]],
+                 unmatched: tuple[np.ndarray | None, np.ndarray | None], cfg: DTMConfig,
+                 pool: ThreadPoolExecutor) -> None:
         self.uv, self.score, self.vxy, self.sizes = uv, score, vxy, sizes
         self.unmatched, self.cfg, self.pool = unmatched, cfg, pool
         self.alive = np.ones(len(score), bool)
