@@ -212,6 +212,17 @@ def test_torch_kernels_match_opencv_paths():
     assert up.shape == (2, 74, 104) and torch.allclose(up, ref, atol=1e-5)
 
 
+def test_torch_path_matches_opencv_path(monkeypatch):
+    # the path CUDA tensors take, run on the CPU
+    img = _texture(5, (96, 120))
+    ref = detect_harrisz(img)
+    monkeypatch.setattr(hz, "_use_opencv", lambda x: False)
+    kp = detect_harrisz(img)
+    assert len(kp) == len(ref) > 20
+    assert _cdist(kp.xy, ref.xy).min(1).values.max() < 1e-3
+    assert torch.allclose(kp.ellipse, ref.ellipse, rtol=1e-3, atol=1e-5)
+
+
 def test_config_errors():
     assert HarrisZConfig.from_dict({"max_keypoints": 10}).max_keypoints == 10
     with pytest.raises(ConfigError):

@@ -143,6 +143,11 @@ def _kernel_radius(sigma: float) -> int:
     return max(1, math.ceil(3.0 * sigma))
 
 
+def _use_opencv(x: torch.Tensor) -> bool:
+    """Whether the image filters of tensor ``x`` run in OpenCV (CPU tensors) rather than in torch."""
+    return x.device.type == "cpu"
+
+
 def _lanczos_weights(frac: float) -> torch.Tensor:
     """(8,) normalised Lanczos-4 weights of the taps at floor(x) - 3 .. floor(x) + 4, frac = x - floor(x)."""
     d = np.arange(8) - 3 - frac
@@ -162,7 +167,7 @@ def _lanczos_upsample2(image: torch.Tensor) -> torch.Tensor:
     Returns:
         (C, 2H, 2W) float.
     """
-    if image.device.type == "cpu":
+    if _use_opencv(image):
         src = image.detach().contiguous().numpy()
         return torch.from_numpy(
             np.stack([cv2.resize(ch, None, fx=2, fy=2, interpolation=cv2.INTER_LANCZOS4) for ch in src])
@@ -235,7 +240,7 @@ def _gaussian_blur(channels: list[torch.Tensor], sigma: float) -> list[torch.Ten
     torch shifted multiply-adds (much faster than single-channel conv2d). Both give the same result.
     """
     k = _gaussian_kernel(sigma)
-    if channels[0].device.type == "cpu":
+    if _use_opencv(channels[0]):
         k32 = k.astype(np.float32)
         return [
             torch.from_numpy(
@@ -263,7 +268,7 @@ def _gaussian_blur_torch(x: torch.Tensor, kernel: np.ndarray) -> torch.Tensor:
 
 def _max_filter(x: torch.Tensor, window: int) -> torch.Tensor:
     """Maximum over the window x window neighbourhood of each pixel of (H, W); outside pixels are ignored."""
-    if x.device.type == "cpu":
+    if _use_opencv(x):
         return torch.from_numpy(cv2.dilate(x.contiguous().numpy(), np.ones((window, window), np.uint8)))
     return _max_filter_torch(x, window)
 
@@ -275,14 +280,12 @@ def _max_filter_torch(x: torch.Tensor, window: int) -> torch.Tensor:
     return F.max_pool2d(pooled, (window, 1), stride=1, padding=(h, 0))[0, 0]
 
 
-def _zscore_difference(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
-    """z(x) - z(y) with z the z-score over the whole image (0 for a constant image); overwrites x."""
-    std_x, mean_x = torch.std_mean(x)
-    std_y, mean_y = torch.std_mean(y)
-    out = x.sub_(mean_x).div_(std_x) if bool(std_x > 0) else x.zero_()
-    if bool(std_y > 0):
-        out.sub_((y - mean_y).div_(std_y))
-    return out
+def _zscore(x: torch.Tensor) -> torch.Tensor:
+    """z-score of an (H, W) image over all its pixels (zeros for a constant image); may reuse x's memory."""
+    centred = x.sub_(x.mean())
+    flat = centred.view(-1)
+    std = torch.sqrt(torch.dot(flat, flat) / max(flat.numel() - 1, 1))  # BLAS dot: ~8x faster than std_mean
+    return centred.div_(std) if bool(std > 0) else centred.zero_()
 
 
 def _detect_level(
@@ -310,7 +313,7 @@ def _detect_level(
     mask = _gaussian_blur([(magnitude > magnitude.mean()).to(magnitude.dtype)], s_d * factor)[0]
     dx, dy = gx.mul_(mask), gy.mul_(mask)
     a, b, c = _gaussian_blur([dx * dx, dy * dy, dx * dy], s_i * factor)
-    response = _zscore_difference(torch.addcmul(a * b, c, c, value=-1.0), (a + b).square_())
+    response = _zscore(torch.addcmul(a * b, c, c, value=-1.0)).sub_(_zscore((a + b).square_()))
 
     ys, xs = _unique_peaks(response, mask, cfg.peak_window, cfg.mask_threshold)
     if len(ys) == 0:
