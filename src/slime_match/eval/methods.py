@@ -1,0 +1,312 @@
+"""Registry of the matching methods compared by the benchmark (the paper's set, where it runs offline).
+
+A method is named by a spec ``name[:key=value,key=value...]``, e.g. ``"hz+:descriptor=tfeat"``; the
+options go to the method's factory (``make_config`` for the package's own presets). :func:`make_method`
+returns a callable ``(image0, image1) -> (xy0, xy1, scores, seconds)`` that builds its models lazily on the
+first call (so listing methods costs nothing) and times only the matching itself.
+
+Images are (H, W, 3) float32 RGB arrays in [0, 1]; keypoints are (K, 2) float64 pixels in the frame of the
+given images (centre of the top-left pixel = (0, 0)); scores are (K,) float64 dissimilarities (lower is
+better); seconds is the wall-clock time of the call, models excluded.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+
+from slime_match.errors import ConfigError
+
+logger = logging.getLogger("slime_match")
+
+MethodOutput = tuple[np.ndarray, np.ndarray, np.ndarray, float]
+MethodFn = Callable[[np.ndarray, np.ndarray], MethodOutput]
+
+
+def _device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+def _sync() -> None:
+    """Wait for queued CUDA work so that timings are complete."""
+    if torch.cuda.is_available() and torch.cuda.is_initialized():
+        torch.cuda.synchronize()
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    """(H, W, 3) float RGB in [0, 1] -> (H, W) float32 luminance."""
+    return cv2.cvtColor(np.ascontiguousarray(image, dtype=np.float32), cv2.COLOR_RGB2GRAY)
+
+
+def _empty() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
+
+
+class MatcherMethod:
+    """A package preset ("slime", "hz+", "rootsift", ...) run through :class:`slime_match.Matcher`.
+
+    Args:
+        preset: a preset of :func:`slime_match.config.make_config`.
+        options: flat overrides (``descriptor``, ``shape``, ``orientation``, ``device``...).
+    """
+
+    def __init__(self, preset: str, **options: Any) -> None:
+        from slime_match.config import make_config
+
+        options.setdefault("ransac", "none")
+        self.config = make_config(preset, **options)  # validates option names now
+        self._matcher = None
+
+    def __call__(self, image0: np.ndarray, image1: np.ndarray) -> MethodOutput:
+        from slime_match.matcher import Matcher
+
+        if self._matcher is None:
+            self._matcher = Matcher(self.config)
+        start = time.perf_counter()
+        result = self._matcher(image0, image1)
+        seconds = time.perf_counter() - start
+        return result.keypoints0, result.keypoints1, result.scores, seconds
+
+
+@dataclass
+class KeyNetConfig:
+    """Key.Net + AffNet + OriNet + descriptor + AdaLAM (kornia).
+
+    Attributes:
+        num_features: Key.Net keypoints per image (kornia's KeyNetAffNetHardNet default).
+        upright: no OriNet (the paper's upright Key.Net).
+        descriptor: "hardnet" | "tfeat" | "auto" (HardNet when its weights are cached, else TFeat).
+        device: "auto" | "cpu" | "cuda".
+    """
+
+    num_features: int = 8000
+    upright: bool = False
+    descriptor: str = "auto"
+    device: str = "auto"
+
+
+class KeyNetAdaLAM:
+    """Key.Net + AffNet + OriNet + HardNet/TFeat + AdaLAM built from kornia modules.
+
+    Scores are the descriptor distances returned by AdaLAM.
+    """
+
+    def __init__(self, **options: Any) -> None:
+        self.config = _dataclass_from(KeyNetConfig, options, "keynet")
+        if self.config.descriptor not in ("auto", "hardnet", "tfeat"):
+            raise ConfigError(
+                f"keynet descriptor must be auto, hardnet or tfeat, got {self.config.descriptor!r}"
+            )
+        self._feature = None
+
+    def _build(self) -> None:
+        import kornia.feature as KF
+
+        from slime_match.features.weights import is_cached
+
+        cfg = self.config
+        descriptor = cfg.descriptor
+        if descriptor == "auto":
+            descriptor = "hardnet" if is_cached("hardnet") else "tfeat"
+            if descriptor == "tfeat":
+                logger.warning("keynet: HardNet weights not cached, using TFeat as the descriptor")
+        self.device = _device(cfg.device)
+        orienter = KF.PassLAF() if cfg.upright else KF.LAFOrienter(angle_detector=KF.OriNet(True))
+        detector = KF.KeyNetDetector(
+            True,
+            num_features=cfg.num_features,
+            ori_module=orienter,
+            aff_module=KF.LAFAffNetShapeEstimator(True, preserve_orientation=False).eval(),
+        )
+        patch = KF.HardNet(True) if descriptor == "hardnet" else KF.TFeat(True)
+        desc = KF.LAFDescriptor(patch, patch_size=32, grayscale_descriptor=True)
+        self._feature = KF.LocalFeature(detector, desc).to(self.device).eval()
+
+    @torch.inference_mode()
+    def __call__(self, image0: np.ndarray, image1: np.ndarray) -> MethodOutput:
+        import kornia.feature as KF
+
+        if self._feature is None:
+            self._build()
+        _sync()
+        start = time.perf_counter()
+        out = []
+        for image in (image0, image1):
+            tensor = torch.from_numpy(_grey(image))[None, None].to(self.device)
+            lafs, _, descs = self._feature(tensor)
+            out.append((lafs, descs[0], image.shape[:2]))
+        (laf0, d0, hw0), (laf1, d1, hw1) = out
+        if len(d0) < 2 or len(d1) < 2:
+            xy0, xy1, scores = _empty()
+        else:
+            dists, idx = KF.match_adalam(d0, d1, laf0, laf1, hw1=hw0, hw2=hw1)
+            idx = idx.cpu().numpy()
+            xy0 = laf0[0, idx[:, 0], :, 2].cpu().numpy().astype(np.float64)
+            xy1 = laf1[0, idx[:, 1], :, 2].cpu().numpy().astype(np.float64)
+            scores = dists.reshape(-1).cpu().numpy().astype(np.float64)
+        _sync()
+        return xy0, xy1, scores, time.perf_counter() - start
+
+
+@dataclass
+class SiftConfig:
+    """OpenCV SIFT + Lowe's ratio test (a peer runnable offline).
+
+    Attributes:
+        ratio: keep a match when d1 / d2 < ratio.
+        num_features: SIFT keypoints per image (0 = all).
+    """
+
+    ratio: float = 0.8
+    num_features: int = 0
+
+
+class OpenCVSift:
+    """OpenCV SIFT descriptors, brute-force 2-NN, ratio test; scores are the distance ratios."""
+
+    def __init__(self, **options: Any) -> None:
+        self.config = _dataclass_from(SiftConfig, options, "opencv-sift")
+        if not 0 < self.config.ratio <= 1:
+            raise ConfigError(f"opencv-sift ratio must be in (0, 1], got {self.config.ratio}")
+
+    def __call__(self, image0: np.ndarray, image1: np.ndarray) -> MethodOutput:
+        start = time.perf_counter()
+        sift = cv2.SIFT_create(nfeatures=self.config.num_features)
+        kd = [
+            sift.detectAndCompute(np.clip(_grey(im) * 255 + 0.5, 0, 255).astype(np.uint8), None)
+            for im in (image0, image1)
+        ]
+        (k0, d0), (k1, d1) = kd
+        if d0 is None or d1 is None or len(d0) < 1 or len(d1) < 2:
+            xy0, xy1, scores = _empty()
+        else:
+            knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(d0, d1, k=2)
+            pairs = np.array([(m[0].queryIdx, m[0].trainIdx, m[0].distance, m[1].distance) for m in knn])
+            ratio = pairs[:, 2] / np.maximum(pairs[:, 3], 1e-12)
+            keep = ratio < self.config.ratio
+            pts0 = np.array([k.pt for k in k0], np.float64)
+            pts1 = np.array([k.pt for k in k1], np.float64)
+            xy0 = pts0[pairs[keep, 0].astype(np.int64)]
+            xy1 = pts1[pairs[keep, 1].astype(np.int64)]
+            scores = ratio[keep]
+        return xy0, xy1, scores, time.perf_counter() - start
+
+
+def _dataclass_from(cls: type, options: dict[str, Any], what: str) -> Any:
+    names = set(cls.__dataclass_fields__)
+    bad = sorted(set(options) - names)
+    if bad:
+        raise ConfigError(f"unknown option(s) {bad} for {what}; valid: {sorted(names)}")
+    return cls(**options)
+
+
+def _preset(preset: str, **fixed: Any) -> Callable[..., MethodFn]:
+    return lambda **options: MatcherMethod(preset, **{**fixed, **options})
+
+
+# name -> (the paper's label, factory(**options) -> MethodFn)
+REGISTRY: dict[str, tuple[str, Callable[..., MethodFn]]] = {
+    "slime": ("Slimed Hz+", _preset("slime")),
+    "slime-upright": ("Slimed Hz+ (upright)", _preset("slime-upright")),
+    "slime-rootsift": ("Slimed RootSIFT", _preset("slime-rootsift")),
+    "hz+": ("Hz+", _preset("hz+")),
+    "hz+-upright": ("Hz+ (upright)", _preset("hz+-upright")),
+    "rootsift": ("RootSIFT", _preset("rootsift")),
+    "rootsift-upright": ("RootSIFT (upright)", _preset("rootsift-upright")),
+    "keynet": ("Key.Net", lambda **o: KeyNetAdaLAM(**o)),
+    "keynet-upright": ("Key.Net (upright)", lambda **o: KeyNetAdaLAM(**{"upright": True, **o})),
+    "opencv-sift": ("OpenCV SIFT", lambda **o: OpenCVSift(**o)),
+}
+
+PAPER_METHODS = (
+    "rootsift",
+    "rootsift-upright",
+    "slime-rootsift",
+    "keynet",
+    "keynet-upright",
+    "hz+",
+    "hz+-upright",
+    "slime",
+    "slime-upright",
+    "opencv-sift",
+)
+
+
+def _value(text: str) -> Any:
+    low = text.lower()
+    if low in ("true", "false"):
+        return low == "true"
+    if low == "none":
+        return None
+    for cast in (int, float):
+        try:
+            return cast(text)
+        except ValueError:
+            pass
+    return text
+
+
+def parse_method_spec(spec: str) -> tuple[str, dict[str, Any]]:
+    """``"hz+:descriptor=tfeat,shape=baumberg"`` -> ("hz+", {"descriptor": "tfeat", "shape": "baumberg"}).
+
+    Values are parsed as bool / None / int / float when they look like one, else kept as strings.
+
+    Raises:
+        ConfigError: unknown method name or a malformed option.
+    """
+    name, _, rest = spec.strip().partition(":")
+    if name not in REGISTRY:
+        raise ConfigError(f"unknown method {name!r}; choose one of {', '.join(REGISTRY)}")
+    options = {}
+    for item in filter(None, (s.strip() for s in rest.split(","))):
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"method option {item!r} in {spec!r} is not 'key=value'")
+        options[key.strip()] = _value(value.strip())
+    return name, options
+
+
+def method_label(spec: str) -> str:
+    """File-system safe, unique name of a method spec (used for the prediction cache folders)."""
+    name, options = parse_method_spec(spec)
+    text = name + "".join(f"_{k}-{v}" for k, v in sorted(options.items()))
+    return re.sub(r"[^A-Za-z0-9+._-]", "_", text)
+
+
+def method_title(spec: str) -> str:
+    """Human-readable name of a spec: the paper's label plus any options."""
+    name, options = parse_method_spec(spec)
+    title = REGISTRY[name][0]
+    return title + (f" [{', '.join(f'{k}={v}' for k, v in options.items())}]" if options else "")
+
+
+def make_method(spec: str, **defaults: Any) -> MethodFn:
+    """Build the callable of a method spec; ``defaults`` (e.g. ``device``, ``seed``) apply unless the spec
+    sets them, and only where the method accepts them.
+
+    Raises:
+        ConfigError: unknown method or option.
+    """
+    name, options = parse_method_spec(spec)
+    factory = REGISTRY[name][1]
+    accepted = _accepted(name)
+    merged = {**{k: v for k, v in defaults.items() if k in accepted}, **options}
+    return factory(**merged)
+
+
+def _accepted(name: str) -> set[str]:
+    if name.startswith("keynet"):
+        return set(KeyNetConfig.__dataclass_fields__)
+    if name == "opencv-sift":
+        return set(SiftConfig.__dataclass_fields__)
+    return {"device", "seed"}
