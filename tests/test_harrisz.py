@@ -153,7 +153,8 @@ def test_ranking_order_and_cap():
 
 
 @pytest.mark.parametrize(
-    "image", [torch.zeros(3, 100, 120), torch.full((1, 64, 64), 0.5), torch.rand(3, 8, 8), torch.rand(1, 20, 300)]
+    "image",
+    [torch.zeros(3, 100, 120), torch.full((1, 64, 64), 0.5), torch.rand(3, 8, 8), torch.rand(1, 20, 300)],
 )
 def test_empty_results(image):
     kp = detect_harrisz(image)

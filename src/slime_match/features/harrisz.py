@@ -318,19 +318,10 @@ def _detect_level(
     ys, xs = _unique_peaks(response, mask, cfg.peak_window, cfg.mask_threshold)
     if len(ys) == 0:
         return _empty_level()
-    values = torch.stack(
-        (
-            response[ys, xs],
-            response[ys, xs - 1],
-            response[ys, xs + 1],
-            response[ys - 1, xs],
-            response[ys + 1, xs],
-            a[ys, xs],
-            b[ys, xs],
-            c[ys, xs],
-        ),
-        dim=1,
-    ).double().cpu().numpy()
+    # response at the peak and its 4 neighbours (parabola fits), then the second-moment matrix entries
+    steps = ((0, 0), (0, -1), (0, 1), (-1, 0), (1, 0))
+    samples = [response[ys + dy, xs + dx] for dy, dx in steps] + [t[ys, xs] for t in (a, b, c)]
+    values = torch.stack(samples, dim=1).double().cpu().numpy()
 
     order = np.argsort(-values[:, 0], kind="stable")
     peaks_xy = torch.stack((xs, ys), dim=1).cpu().numpy().astype(np.float64)
