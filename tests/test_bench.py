@@ -15,22 +15,22 @@ from slime_match.errors import ConfigError
 from slime_match.eval import bench, methods
 from slime_match.eval import metrics as M
 
-HZ_FREE = "hz+:descriptor=rootsift,shape=baumberg,orientation=gradient"
+HZ_FREE = "hz+:descriptor=rootsift,shape=baumberg,orientation=gradient,max_keypoints=600"
 METHODS = f"rootsift;{HZ_FREE}"
 
 
 @pytest.fixture(scope="module")
 def tiny_data(tmp_path_factory):
-    """A planar folder (graf img1 at 320x256 and an exact perspective warp of it) and a WxBS-style folder
-    (the Middlebury motorcycle stereo pair at half size, GT correspondences from its disparity)."""
+    """A planar folder (graf img1 at 256x208 and an exact perspective warp of it) and a WxBS-style folder
+    (the Middlebury motorcycle stereo pair at 0.4 scale, GT correspondences from its disparity)."""
     root = tmp_path_factory.mktemp("data")
     img = cv2.imread(str(require(DATA / "oxford_graf" / "img1.png")))
-    img = cv2.resize(img, (320, 256), interpolation=cv2.INTER_AREA)
+    img = cv2.resize(img, (256, 208), interpolation=cv2.INTER_AREA)
     H = np.array([[0.9, 0.12, 20.0], [-0.08, 0.95, 12.0], [2e-4, 1e-4, 1.0]])
     planar = root / "planar"
     planar.mkdir()
     cv2.imwrite(str(planar / "g1.png"), img)
-    cv2.imwrite(str(planar / "g2.png"), cv2.warpPerspective(img, H, (320, 256), flags=cv2.INTER_LINEAR))
+    cv2.imwrite(str(planar / "g2.png"), cv2.warpPerspective(img, H, (256, 208), flags=cv2.INTER_LINEAR))
     np.savetxt(planar / "g_H12.txt", H)
 
     from skimage.data import stereo_motorcycle
@@ -38,14 +38,14 @@ def tiny_data(tmp_path_factory):
     left, right, disp = stereo_motorcycle()
     pair = root / "wxbs" / "moto"
     pair.mkdir(parents=True)
-    half = [cv2.resize(im, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA) for im in (left, right)]
+    half = [cv2.resize(im, None, fx=0.4, fy=0.4, interpolation=cv2.INTER_AREA) for im in (left, right)]
     cv2.imwrite(str(pair / "01.png"), cv2.cvtColor(half[0], cv2.COLOR_RGB2BGR))
     cv2.imwrite(str(pair / "02.png"), cv2.cvtColor(half[1], cv2.COLOR_RGB2BGR))
     rows, cols = np.mgrid[8 : disp.shape[0] - 8 : 16, 8 : disp.shape[1] - 8 : 16]
     d = disp[rows, cols]
     ok = np.isfinite(d) & (cols - d >= 0)
     full = np.stack([cols[ok], rows[ok], cols[ok] - d[ok], rows[ok]], 1).astype(np.float64)
-    np.savetxt(pair / "corrs.txt", (full + 0.5) * 0.5 - 0.5)  # pixel centres at half size
+    np.savetxt(pair / "corrs.txt", (full + 0.5) * 0.4 - 0.5)  # pixel centres at 0.4 scale
     return root
 
 
@@ -138,7 +138,10 @@ def test_table_consistent_with_metrics(first_run):
         assert len(best) == 1 and float(best[0]["accuracy"]) == max(float(r["accuracy"]) for r in mine)
     table = (out / "table.md").read_text()
     assert "| RootSIFT | 3 |" in table and "| RootSIFT | -- |" in table
-    assert table.count("Hz+ [descriptor=rootsift, shape=baumberg, orientation=gradient] |") == 3 + 1  # + time
+    assert (
+        table.count("Hz+ [descriptor=rootsift, shape=baumberg, orientation=gradient, max_keypoints=600] |")
+        == 3 + 1
+    )  # + time
 
 
 def test_metrics_are_meaningful(first_run):
