@@ -26,6 +26,7 @@ from scipy.spatial import Delaunay, cKDTree
 from ..errors import ConfigError
 
 log = logging.getLogger("slime_match")
+_PARALLEL_MIN = 6000  # points (candidates + unmatched) from which both meshes are built in two threads
 
 
 @dataclass
@@ -189,6 +190,25 @@ def _near_pairs(unit_vertex: np.ndarray, alive: np.ndarray, mesh: _Mesh, n_units
     return np.sort(keys[ua != ub])
 
 
+def _within_two(mesh: _Mesh, unit_vertex: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(P,) whether the vertices of units a and b in this mesh are at most two Delaunay edges apart."""
+    n = len(mesh.vertex)
+    local = np.full(unit_vertex.max() + 1, -1, np.int64)
+    local[mesh.vertex] = np.arange(n)
+    e = np.concatenate([mesh.edges, mesh.edges[:, ::-1]])
+    e = e[np.argsort(e[:, 0], kind="stable")]
+    deg = np.bincount(e[:, 0], minlength=n)
+    start = np.cumsum(deg) - deg
+    # two-hop paths i -> k -> j for every edge (i, k) and every edge (k, j)
+    hop = np.repeat(np.arange(len(e)), deg[e[:, 1]])
+    offset = np.arange(len(hop)) - np.repeat(np.cumsum(deg[e[:, 1]]) - deg[e[:, 1]], deg[e[:, 1]])
+    j = e[start[e[hop, 1]] + offset, 1]
+    keys = np.unique(np.concatenate([e[:, 0] * n + e[:, 1], e[hop, 0] * n + j, np.arange(n) * (n + 1)]))
+    q = local[unit_vertex[a]] * n + local[unit_vertex[b]]
+    pos = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
+    return keys[pos] == q
+
+
 def _greedy_survivors(a: np.ndarray, b: np.ndarray, alive: np.ndarray) -> np.ndarray:
     """Units surviving the walk by rank where each surviving unit removes its inconsistent neighbours.
 
@@ -335,11 +355,15 @@ def dtm_filter(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0: tupl
     uscore = np.full(len(unit_keys), np.inf)
     np.minimum.at(uscore, unit_of, scores)
     unmatched = (_prepare_unmatched(unmatched0, sizes[0]), _prepare_unmatched(unmatched1, sizes[1]))
-    with ThreadPoolExecutor(2) as pool:
+    pool = ThreadPoolExecutor(2) if k + sum(len(u) for u in unmatched if u is not None) >= _PARALLEL_MIN else None
+    try:
         units = _Units((unit_keys // len(vxy1), unit_keys % len(vxy1)), uscore, (vxy0, vxy1), sizes,
                        unmatched, cfg, pool)
         removed_at, iterations = units.contract()
         restored = units.expand(removed_at, iterations)
+    finally:
+        if pool is not None:
+            pool.shutdown()
     log.debug("DTM: %d contraction iterations, %d of %d units kept (%d restored)", iterations,
               units.alive.sum(), len(uscore), restored.sum())
     return DTMResult(units.alive[unit_of], removed_at[unit_of], restored[unit_of])
@@ -357,7 +381,7 @@ class _Units:
     def __init__(self, uv: tuple[np.ndarray, np.ndarray], score: np.ndarray, vxy: tuple[np.ndarray, np.ndarray],
                  sizes: tuple[tuple[int, int], tuple[int, int]],
                  unmatched: tuple[np.ndarray | None, np.ndarray | None], cfg: DTMConfig,
-                 pool: ThreadPoolExecutor) -> None:
+                 pool: ThreadPoolExecutor | None) -> None:
         self.uv, self.score, self.vxy, self.sizes = uv, score, vxy, sizes
         self.unmatched, self.cfg, self.pool = unmatched, cfg, pool
         self.alive = np.ones(len(score), bool)
@@ -369,8 +393,10 @@ class _Units:
         key = np.packbits(self.alive).tobytes()
         if self._cache is None or self._cache[0] != key:
             alive = self.alive.copy()
-            built = tuple(self.pool.map(lambda s: _triangulate(
-                np.unique(self.uv[s][alive]), self.vxy[s], self.sizes[s], self.unmatched[s], self.cfg), (0, 1)))
+            def build(s: int) -> _Mesh:
+                return _triangulate(np.unique(self.uv[s][alive]), self.vxy[s], self.sizes[s], self.unmatched[s],
+                                    self.cfg)
+            built = tuple(self.pool.map(build, (0, 1)) if self.pool is not None else map(build, (0, 1)))
             self._cache = (key, built)
         return self._cache[1]
 
@@ -383,7 +409,11 @@ class _Units:
             mesh = self.meshes()
             near0, near1 = (_near_pairs(self.uv[s], self.alive, mesh[s], n_units) for s in (0, 1))
             consistent = np.intersect1d(near0, near1, assume_unique=True)
-            inconsistent = np.setxor1d(near0, near1, assume_unique=True)
+            only0 = np.setdiff1d(near0, near1, assume_unique=True)
+            only1 = np.setdiff1d(near1, near0, assume_unique=True)
+            inconsistent = np.sort(np.concatenate([
+                only0[~_within_two(mesh[1], self.uv[1], only0 // n_units, only0 % n_units)],
+                only1[~_within_two(mesh[0], self.uv[0], only1 // n_units, only1 % n_units)]]))
             n_consistent = np.bincount(consistent // n_units, minlength=n_units)
             rank = np.empty(n_units, np.int64)
             rank[np.lexsort((-n_consistent, self.score))] = np.arange(n_units)
