@@ -195,22 +195,26 @@ class PatchPyramid:
         """
         laf = laf.to(device=self.device, dtype=torch.float32)
         n, p = laf.shape[0], patch_size
-        out = torch.empty(n, 1, p, p, device=self.device)
         if n == 0:
-            return out
+            return torch.empty(0, 1, p, p, device=self.device)
         lin = torch.linspace(-magnification, magnification, p, device=self.device)
         gy, gx = torch.meshgrid(lin, lin, indexing="ij")
-        unit = torch.stack([gx.reshape(-1), gy.reshape(-1)], 0)  # (2, P*P)
+        unit = torch.stack([gx.reshape(-1), gy.reshape(-1), torch.ones(p * p, device=self.device)], 1)
         step = 2.0 * magnification * laf_scale(laf) / max(p - 1, 1)
         level = torch.floor(torch.log2(step.clamp_min(1e-6))).clamp(0, len(self.levels) - 1).long()
-        for lv in torch.unique(level).tolist():
-            idx = (level == lv).nonzero().squeeze(1)
-            sub = laf[idx]
-            pts = (sub[:, :, :2] @ unit + sub[:, :, 2:]) / float(2**lv)  # (n_l, 2, P*P) level pixels
+        order = torch.argsort(level, stable=True)
+        counts = torch.bincount(level, minlength=len(self.levels)).tolist()
+        groups = []
+        for lv, sub in zip(range(len(self.levels)), laf[order].split(counts), strict=True):
+            if sub.shape[0] == 0:
+                continue
             img = self.levels[lv]
             h, w = img.shape[-2:]
-            norm = torch.stack([2.0 * pts[:, 0] / max(w - 1, 1) - 1.0, 2.0 * pts[:, 1] / max(h - 1, 1) - 1.0], -1)
-            grid = norm.reshape(1, idx.numel() * p, p, 2)
+            # Pixels -> level pixels -> grid_sample's [-1, 1] (align_corners=True), folded into one affine map.
+            norm = torch.tensor([2.0 / (max(w - 1, 1) * 2**lv), 2.0 / (max(h - 1, 1) * 2**lv)], device=self.device)
+            affine = sub * norm[None, :, None]
+            affine[:, :, 2] -= 1.0
+            grid = (unit @ affine.transpose(1, 2)).reshape(1, sub.shape[0] * p, p, 2)
             patches = F.grid_sample(img, grid, mode="bilinear", padding_mode="border", align_corners=True)
-            out[idx] = patches.reshape(idx.numel(), 1, p, p)
-        return out
+            groups.append(patches.reshape(sub.shape[0], 1, p, p))
+        return torch.cat(groups)[torch.argsort(order)]

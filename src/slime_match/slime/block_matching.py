@@ -17,10 +17,11 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..features.laf import set_laf_angle
 from ..geometry.ransac import HomographyRansacConfig, ransac_homography_many
 from ..pipelines import BasePipeline
 from ..types import Features, Matches
-from .blocks import Block, BlockConfig, make_blocks, points_in_blocks, resize_lanczos
+from .blocks import Block, points_in_blocks, resize_lanczos
 from .planes import relative_orientation
 
 logger = logging.getLogger("slime_match")
@@ -79,32 +80,39 @@ def orientation_bin(angle: float, bins: int) -> int:
     return int(round(angle / (2 * math.pi / bins))) % bins
 
 
-def fixed_features(pipeline: BasePipeline, level: ScaleLevel, index: np.ndarray, bin_index: int,
-                   bins: int) -> Features:
-    """Features ``index`` of a level re-described under the fixed orientation of ``bin_index`` (cached)."""
+def describe_fixed_bins(pipeline: BasePipeline, level: ScaleLevel, requests: dict[int, np.ndarray],
+                        bins: int) -> None:
+    """Compute (once, cached in ``level.fixed``) the descriptors of features under fixed orientations.
+
+    Args:
+        requests: orientation bin -> indices of the level's features needed under that bin's angle.
+            Each bin is described in one batched call, and only for features not already cached.
+    """
     n = len(level.features)
-    computed, descriptors = level.fixed.get(bin_index, (np.zeros(n, bool), None))
-    missing = index[~computed[index]]
-    if len(missing):
-        angle = bin_index * 2 * math.pi / bins
-        fresh = pipeline.describe_fixed(level.context, level.features.subset(torch.from_numpy(missing)), angle)
+    for bin_index, index in requests.items():
+        computed, descriptors = level.fixed.get(bin_index, (np.zeros(n, bool), None))
+        missing = np.unique(index)
+        missing = missing[~computed[missing]]
+        if len(missing) == 0:
+            continue
+        fresh = pipeline.describe_fixed(level.context, level.features.subset(torch.from_numpy(missing)),
+                                        bin_index * 2 * math.pi / bins)
         if descriptors is None:
             descriptors = torch.zeros(n, fresh.descriptors.shape[1], device=fresh.descriptors.device)
         descriptors[torch.from_numpy(missing).to(descriptors.device)] = fresh.descriptors
         computed = computed.copy()
         computed[missing] = True
         level.fixed[bin_index] = (computed, descriptors)
-    laf = _fixed_laf(level.features, index, bin_index * 2 * math.pi / bins)
+
+
+def fixed_features(level: ScaleLevel, index: np.ndarray, bin_index: int, bins: int) -> Features:
+    """Features ``index`` of a level under the fixed orientation of ``bin_index`` (see describe_fixed_bins)."""
+    computed, descriptors = level.fixed[bin_index]
+    if not computed[index].all():
+        raise RuntimeError("fixed-orientation descriptors requested before describe_fixed_bins")
     select = torch.from_numpy(index).to(descriptors.device)
+    laf = set_laf_angle(level.features.shape_laf[select], bin_index * 2 * math.pi / bins)
     return Features(laf, descriptors[select], level.features.response[select])
-
-
-def _fixed_laf(features: Features, index: np.ndarray, angle: float) -> torch.Tensor:
-    """LAFs of the fixed-orientation features: the shape frame turned to ``angle`` (isotropic scale kept)."""
-    from ..features.laf import set_laf_angle
-
-    shape = features.shape_laf[torch.from_numpy(index).to(features.shape_laf.device)]
-    return set_laf_angle(shape, angle)
 
 
 @dataclass
@@ -132,7 +140,7 @@ class BlockPairMatches:
     scores: np.ndarray
 
 
-def _local(features: Features, box) -> Features:
+def shift_features(features: Features, box: tuple[float, float, float, float]) -> Features:
     """The same features with LAF centres shifted into a block's own frame."""
     laf = features.laf.clone()
     laf[:, 0, 2] -= box[0]
@@ -150,7 +158,7 @@ def _match_pairs(pipeline, pairs, get0, get1, blocks0, blocks1):
         if len(f0) < 4 or len(f1) < 4:
             out.append((f0, f1, Matches.empty()))
             continue
-        out.append((f0, f1, pipeline.match(_local(f0, b0.box), _local(f1, b1.box), size0, size1)))
+        out.append((f0, f1, pipeline.match(shift_features(f0, b0.box), shift_features(f1, b1.box), size0, size1)))
     return out
 
 
@@ -197,14 +205,26 @@ def match_block_pairs(
     refined_pairs = list(thetas)
     bin_of = {pair: orientation_bin(theta, bins) for pair, theta in thetas.items()}
 
+    requests0: dict[int, dict[int, list]] = {}
+    requests1: dict[int, dict[int, list]] = {}
+    for pair in refined_pairs:
+        level0, i0 = where0[pair[0]]
+        level1, i1 = where1[pair[1]]
+        requests0.setdefault(id(level0), {}).setdefault(0, []).append(level0.members[i0])
+        requests1.setdefault(id(level1), {}).setdefault(bin_of[pair], []).append(level1.members[i1])
+    for levels, requests in ((levels0, requests0), (levels1, requests1)):
+        for level in levels:
+            wanted = {b: np.concatenate(parts) for b, parts in requests.get(id(level), {}).items()}
+            describe_fixed_bins(pipeline, level, wanted, bins)
+
     def fixed0(w):
         level, i = where0[w]
-        return fixed_features(pipeline, level, level.members[i], 0, bins)
+        return fixed_features(level, level.members[i], 0, bins)
 
     second = []
     for pair in refined_pairs:
         level1, i1 = where1[pair[1]]
-        f1 = fixed_features(pipeline, level1, level1.members[i1], bin_of[pair], bins)
+        f1 = fixed_features(level1, level1.members[i1], bin_of[pair], bins)
         second.extend(_match_pairs(pipeline, [pair], fixed0, lambda _w, f1=f1: f1, blocks0, blocks1))
     results = ransac_homography_many([_positions(f0, f1, m) for f0, f1, m in second], ransac, seed=seed + 1)
 
@@ -246,5 +266,5 @@ def _collect(pairs, hs, thetas, parts) -> BlockPairMatches:
                             cat["xy0"], cat["xy1"], cat["s0"], cat["s1"], cat["score"])
 
 
-__all__ = ["BlockConfig", "BlockPairMatches", "ScaleLevel", "build_levels", "fixed_features",
-           "make_blocks", "match_block_pairs", "orientation_bin"]
+__all__ = ["BlockPairMatches", "ScaleLevel", "build_levels", "describe_fixed_bins", "fixed_features", "shift_features",
+           "match_block_pairs", "orientation_bin"]

@@ -11,7 +11,7 @@ from scipy.spatial import cKDTree
 
 from ..matching.dtm import DTMConfig, dtm_filter
 from ..pipelines import BasePipeline
-from .block_matching import ScaleLevel, fixed_features, orientation_bin
+from .block_matching import ScaleLevel, shift_features, describe_fixed_bins, fixed_features, orientation_bin
 
 
 @dataclass
@@ -67,17 +67,17 @@ def match_tiles(
     Returns:
         xy0, xy1 (T, 2) and scores (T,) of the tile matches, in original pixels.
     """
-    from .block_matching import _local
-
+    jobs = sorted({(c0, c1, orientation_bin(theta, bins))
+                   for (c0, c1), theta in zip(tile_pairs.tolist(), thetas.tolist())})
+    describe_fixed_bins(pipeline, level0, {0: np.concatenate([level0.members[c0] for c0, _, _ in jobs])}, bins)
+    requests1: dict[int, list] = {}
+    for _, c1, b in jobs:
+        requests1.setdefault(b, []).append(level1.members[c1])
+    describe_fixed_bins(pipeline, level1, {b: np.concatenate(parts) for b, parts in requests1.items()}, bins)
     out0, out1, scores = [], [], []
-    done = set()
-    for (c0, c1), theta in zip(tile_pairs.tolist(), thetas.tolist()):
-        b = orientation_bin(theta, bins)
-        if (c0, c1, b) in done:
-            continue
-        done.add((c0, c1, b))
-        f0 = fixed_features(pipeline, level0, level0.members[c0], 0, bins)
-        f1 = fixed_features(pipeline, level1, level1.members[c1], b, bins)
+    for c0, c1, b in jobs:
+        f0 = fixed_features(level0, level0.members[c0], 0, bins)
+        f1 = fixed_features(level1, level1.members[c1], b, bins)
         if len(f0) < 4 or len(f1) < 4:
             continue
         box0, box1 = tile_boxes0[c0], tile_boxes1[c1]
@@ -86,7 +86,7 @@ def match_tiles(
         def flow_filter(y0, y1, offset0=offset0, offset1=offset1):
             return guide(y0 + offset0, y1 + offset1)
 
-        m = pipeline.match(_local(f0, box0), _local(f1, box1), tile_sizes0[c0], tile_sizes1[c1],
+        m = pipeline.match(shift_features(f0, box0), shift_features(f1, box1), tile_sizes0[c0], tile_sizes1[c1],
                            candidate_filter=flow_filter)
         if len(m) == 0:
             continue
