@@ -37,11 +37,14 @@ class DTMConfig:
         border_spacing: spacing of the border ring vertices, as a multiple of sqrt(W * H / n_vertices).
         inside_tolerance: pixels by which a point may fall outside the predicted triangle in expansion.
         max_iterations: safety bound on contraction iterations.
+        settle_fraction: contraction stops after an iteration that removes fewer than this fraction of the
+            alive units (0: only when nothing is removed, as in the spec).
     """
 
     border_spacing: float = 1.0
     inside_tolerance: float = 2.0
     max_iterations: int = 100
+    settle_fraction: float = 0.01
 
     def __post_init__(self) -> None:
         if not self.border_spacing > 0:
@@ -50,6 +53,8 @@ class DTMConfig:
             raise ConfigError(f"DTMConfig.inside_tolerance must be >= 0 px, got {self.inside_tolerance}")
         if self.max_iterations < 1:
             raise ConfigError(f"DTMConfig.max_iterations must be >= 1, got {self.max_iterations}")
+        if not 0 <= self.settle_fraction < 1:
+            raise ConfigError(f"DTMConfig.settle_fraction must be in [0, 1), got {self.settle_fraction}")
 
     @classmethod
     def from_dict(cls, options: dict) -> DTMConfig:
@@ -191,19 +196,24 @@ def _near_pairs(unit_vertex: np.ndarray, alive: np.ndarray, mesh: _Mesh, n_units
 
 
 def _within_two(mesh: _Mesh, unit_vertex: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(P,) whether the vertices of units a and b in this mesh are at most two Delaunay edges apart."""
-    n = len(mesh.vertex)
+    """(P,) whether the vertices of units a and b in this mesh are at most two Delaunay edges apart.
+
+    The middle vertex may be a border vertex: an edge over an empty area in one image may well pass on
+    the other side of a carving keypoint in the other image.
+    """
+    n = len(mesh.tri.points)
     local = np.full(unit_vertex.max() + 1, -1, np.int64)
-    local[mesh.vertex] = np.arange(n)
-    e = np.concatenate([mesh.edges, mesh.edges[:, ::-1]])
-    e = e[np.argsort(e[:, 0], kind="stable")]
-    deg = np.bincount(e[:, 0], minlength=n)
+    local[mesh.vertex] = np.arange(len(mesh.vertex))
+    s = mesh.tri.simplices
+    e = np.concatenate([s[:, [0, 1]], s[:, [1, 2]], s[:, [2, 0]], s[:, [1, 0]], s[:, [2, 1]], s[:, [0, 2]]])
+    e = np.unique(e[:, 0] * n + e[:, 1])
+    src, dst = e // n, e % n
+    deg = np.bincount(src, minlength=n)
     start = np.cumsum(deg) - deg
     # two-hop paths i -> k -> j for every edge (i, k) and every edge (k, j)
-    hop = np.repeat(np.arange(len(e)), deg[e[:, 1]])
-    offset = np.arange(len(hop)) - np.repeat(np.cumsum(deg[e[:, 1]]) - deg[e[:, 1]], deg[e[:, 1]])
-    j = e[start[e[hop, 1]] + offset, 1]
-    keys = np.unique(np.concatenate([e[:, 0] * n + e[:, 1], e[hop, 0] * n + j, np.arange(n) * (n + 1)]))
+    hop = np.repeat(np.arange(len(e)), deg[dst])
+    offset = np.arange(len(hop)) - np.repeat(np.cumsum(deg[dst]) - deg[dst], deg[dst])
+    keys = np.unique(np.concatenate([e, src[hop] * n + dst[start[dst[hop]] + offset]]))
     q = local[unit_vertex[a]] * n + local[unit_vertex[b]]
     pos = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
     return keys[pos] == q
@@ -427,8 +437,11 @@ class _Units:
             if not removed.any():
                 break
             removed_at[removed] = iteration
+            n_alive = self.alive.sum()
             self.alive &= ~removed
             iteration += 1
+            if removed.sum() < self.cfg.settle_fraction * n_alive:
+                break
         return removed_at, iteration
 
     def expand(self, removed_at: np.ndarray, iterations: int) -> np.ndarray:
