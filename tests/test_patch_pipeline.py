@@ -5,8 +5,8 @@ import math
 import cv2
 import pytest
 import torch
-
 from conftest import DATA, require
+
 from slime_match.errors import ConfigError
 from slime_match.features.descriptors import Descriptor, resolve_descriptor
 from slime_match.features.extractor import LocalFeatureExtractor, PatchConfig

@@ -11,7 +11,7 @@ from kornia.feature import SIFTDescriptor
 
 from slime_match.errors import ConfigError, WeightsNotFoundError
 from slime_match.features.laf import PatchPyramid
-from slime_match.features.weights import is_cached, load_state_dict, load_model
+from slime_match.features.weights import is_cached, load_model, load_state_dict
 
 DESCRIPTOR_METHODS = ("hardnet", "tfeat", "rootsift")
 

@@ -84,7 +84,7 @@ class LocalFeatureExtractor:
         self.device = torch.device(device)
         if cfg.orientation == "fixed":
             raise ConfigError("orientation 'fixed' needs an angle: use LocalFeatureExtractor.describe_fixed")
-        common = dict(patch_size=cfg.patch_size, magnification=cfg.magnification, batch_size=cfg.batch_size)
+        common = {"patch_size": cfg.patch_size, "magnification": cfg.magnification, "batch_size": cfg.batch_size}
         self.shape = (
             None
             if cfg.shape == "none"

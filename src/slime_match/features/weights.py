@@ -117,7 +117,7 @@ def load_state_dict(name: str, weights_dir: str | Path | None = None) -> dict:
             return download.load_state_dict_from_url(
                 urls, model_dir=str(folder), file_name=spec.file, map_location=torch.device("cpu")
             )
-    except Exception as exc:  # noqa: BLE001 - any failure of the download/load is reported the same way
+    except Exception as exc:
         raise WeightsNotFoundError(
             f"{name} weights '{spec.file}' are not in {folder} and could not be downloaded "
             f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}). Put the file there "
