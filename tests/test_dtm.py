@@ -130,12 +130,24 @@ def test_greedy_survivors_matches_sequential_walk():
     np.testing.assert_array_equal(dtm_module._greedy_survivors(a[sel], b[sel], alive), ref)
 
 
-def test_locate_matches_find_simplex():
+def test_delaunay_and_locate_match_scipy():
     g = np.random.default_rng(0)
     pts = np.unique(np.rint(g.uniform(0, 300, (500, 2))), axis=0)
-    tri = Delaunay(np.r_[pts, [[-1, -1], [301, -1], [301, 301], [-1, 301]]])
+    pts = np.r_[pts, [[-1, -1], [301, -1], [301, 301], [-1, 301]]]
+    tri = dtm_module._delaunay(pts)
+    ref = Delaunay(pts)
+    # same triangle count and area as Qhull (ties between cocircular points may flip a few edges)
+    area = lambda s: np.abs(dtm_module._cross(pts[s[:, 1]] - pts[s[:, 0]], pts[s[:, 2]] - pts[s[:, 0]])).sum()
+    assert len(tri.simplices) == len(ref.simplices) and area(tri.simplices) == area(ref.simplices)
     q = g.uniform(-0.5, 300.5, (2000, 2))
-    np.testing.assert_array_equal(dtm_module._locate(tri, q), tri.find_simplex(q))
+    found = dtm_module._locate(tri, q)
+    assert np.all(found >= 0)
+    corners = pts[tri.simplices[found]]  # (P, 3, 2): q inside its triangle (barycentric test)
+    lam = np.stack([dtm_module._cross(corners[:, (k + 1) % 3] - q, corners[:, (k + 2) % 3] - q) for k in range(3)], 1)
+    assert np.all(lam >= -1e-9)
+    # neighbours are symmetric and share an edge
+    t, k = np.nonzero(tri.neighbors >= 0)
+    assert np.all((tri.neighbors[tri.neighbors[t, k]] == t[:, None]).any(1))
     assert np.all(dtm_module._locate(tri, np.array([[-50.0, 0.0], [400.0, 400.0]])) == -1)
 
 

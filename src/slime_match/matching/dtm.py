@@ -20,8 +20,9 @@ import logging
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields
 
+import cv2
 import numpy as np
-from scipy.spatial import Delaunay, cKDTree
+from scipy.spatial import cKDTree
 
 from ..errors import ConfigError
 
@@ -82,26 +83,76 @@ class DTMResult:
 
 
 @dataclass
+class _Triangulation:
+    """A planar Delaunay triangulation (SciPy's ``Delaunay`` layout, without Qhull's per-call overhead).
+
+    Attributes:
+        points: (P, 2) float64 integer-valued vertex positions.
+        simplices: (T, 3) int64 counter-clockwise (in x-right, y-down pixel axes: positive cross product)
+            vertex indices.
+        neighbors: (T, 3) triangle across the edge facing each corner, -1 on the hull.
+        half_edges: (3 T + B, 2) directed Delaunay edges, each neighbouring pair once in each direction.
+    """
+
+    points: np.ndarray
+    simplices: np.ndarray
+    neighbors: np.ndarray
+    half_edges: np.ndarray
+
+
+def _delaunay(points: np.ndarray) -> _Triangulation:
+    """Delaunay triangulation of unique integer-valued points (OpenCV's incremental Subdiv2D).
+
+    Args:
+        points: (P, 2) float64 unique integer positions, P >= 3 and not all collinear.
+    """
+    lo = points.min(0).astype(np.int64) - 2
+    span = points.max(0).astype(np.int64) - lo + 3
+    # a far bounding box keeps Subdiv2D's virtual outer vertices from shadowing hull triangles
+    far = 50 * int(span.max())
+    subdiv = cv2.Subdiv2D((int(lo[0]) - far, int(lo[1]) - far, int(span[0]) + 2 * far, int(span[1]) + 2 * far))
+    subdiv.insert(points.astype(np.float32))
+    corners = np.rint(subdiv.getTriangleList().reshape(-1, 2)).astype(np.int64) - lo
+    keys = (points.astype(np.int64) - lo) @ np.array([1, span[0]])
+    order = np.argsort(keys)
+    simp = order[np.searchsorted(keys[order], corners @ np.array([1, span[0]]))].reshape(-1, 3)
+    a, b, c = points[simp[:, 0]], points[simp[:, 1]], points[simp[:, 2]]
+    flip = _cross(b - a, c - a) < 0
+    simp[flip] = simp[flip][:, [0, 2, 1]]
+    # edge facing corner k is (k + 1, k + 2); its twin runs the other way in the neighbouring triangle
+    half = np.stack([simp[:, [1, 2, 0]], simp[:, [2, 0, 1]]], 2).reshape(-1, 2)
+    n = len(points)
+    undirected = np.minimum(half[:, 0], half[:, 1]) * n + np.maximum(half[:, 0], half[:, 1])
+    order = np.argsort(undirected, kind="stable")
+    twin = np.full(len(half), -1, np.int64)
+    same = undirected[order][1:] == undirected[order][:-1]
+    twin[order[1:][same]], twin[order[:-1][same]] = order[:-1][same], order[1:][same]
+    neighbors = np.where(twin >= 0, twin // 3, -1).reshape(-1, 3)
+    hull = half[twin < 0][:, ::-1]
+    return _Triangulation(points, simp, neighbors, np.concatenate([half, hull]))
+
+
+@dataclass
 class _Mesh:
     """Triangulation of one image's kept vertices plus border vertices.
 
     Attributes:
-        tri: scipy Delaunay; points [0, n) are the kept vertices (``vertex`` ids), the rest are border.
+        tri: triangulation; points [0, n) are the kept vertices (``vertex`` ids), the rest are border.
         vertex: (n,) global vertex id of each non-border point.
         edges: (E, 2) undirected Delaunay edges between non-border points (local indices, a < b).
     """
 
-    tri: Delaunay
+    tri: _Triangulation
     vertex: np.ndarray
     edges: np.ndarray
 
 
 def _border_ring(size: tuple[int, int], n_vertices: int, scale: float) -> np.ndarray:
-    """(R, 2) points along the four image sides, 1 px outside the pixel grid."""
+    """(R, 2) integer points along the four image sides, 1 px outside the pixel grid."""
     h, w = size
-    step = scale * np.sqrt(w * h / max(n_vertices, 1))
-    xs = np.linspace(-1.0, w, max(int(np.ceil((w + 1) / step)), 1) + 1)
-    ys = np.linspace(-1.0, h, max(int(np.ceil((h + 1) / step)), 1) + 1)[1:-1]
+    step = max(scale * np.sqrt(w * h / max(n_vertices, 1)), 1.0)
+    xs = np.unique(np.rint(np.linspace(-1.0, w, max(int(np.ceil((w + 1) / step)), 1) + 1)))
+    ys = np.unique(np.rint(np.linspace(-1.0, h, max(int(np.ceil((h + 1) / step)), 1) + 1)))[1:-1]
     top, bottom = np.c_[xs, np.full_like(xs, -1.0)], np.c_[xs, np.full_like(xs, float(h))]
     left, right = np.c_[np.full_like(ys, -1.0), ys], np.c_[np.full_like(ys, float(w)), ys]
     return np.concatenate([top, bottom, left, right])
@@ -125,24 +176,22 @@ def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int
     if unmatched is not None and len(unmatched):
         free = unmatched[~np.isin(_row_keys(unmatched, size), _row_keys(pts, size))]
         first_free = n + len(border)
-        s = Delaunay(np.concatenate([pts, border, free])).simplices
+        s = _delaunay(np.concatenate([pts, border, free])).simplices
         ring_tri = s[((s >= n) & (s < first_free)).any(1)]
-        carved = np.unique(ring_tri[ring_tri >= first_free]) - first_free
+        carved = np.zeros(len(free), bool)
+        carved[ring_tri[ring_tri >= first_free] - first_free] = True
         border = np.concatenate([border, free[carved]])
-    tri = Delaunay(np.concatenate([pts, border]))
-    s = tri.simplices
-    e = np.concatenate([s[:, [0, 1]], s[:, [1, 2]], s[:, [2, 0]]])
-    e = np.sort(e[(e < n).all(1)], axis=1)
-    e = np.unique(e[:, 0] * n + e[:, 1]) if len(e) else np.zeros(0, np.int64)
-    return _Mesh(tri, vertex, np.stack([e // max(n, 1), e % max(n, 1)], 1))
+    tri = _delaunay(np.concatenate([pts, border]))
+    e = tri.half_edges
+    e = e[(e[:, 0] < e[:, 1]) & (e[:, 1] < n)]
+    return _Mesh(tri, vertex, e)
 
 
-def _locate(tri: Delaunay, q: np.ndarray) -> np.ndarray:
-    """(P,) index of the simplex containing each query point, -1 outside the hull.
+def _locate(tri: _Triangulation, q: np.ndarray) -> np.ndarray:
+    """(P,) index of the triangle containing each query point, -1 outside the hull.
 
-    Vectorised visibility walk from a simplex at the nearest vertex (``tri.neighbors`` across the edge
-    facing the most negative barycentric coordinate); SciPy's ``find_simplex`` would first build
-    barycentric transforms for every simplex, which costs more than the triangulation itself.
+    Vectorised visibility walk from a triangle at the nearest vertex (``tri.neighbors`` across the edge
+    facing the most negative barycentric coordinate); it terminates on Delaunay triangulations.
     """
     pts, simp, nbr = tri.points, tri.simplices, tri.neighbors
     start = np.empty(len(pts), np.int64)
@@ -150,21 +199,18 @@ def _locate(tri: Delaunay, q: np.ndarray) -> np.ndarray:
     cur = start[cKDTree(pts).query(q)[1]]
     out = np.full(len(q), -1, np.int64)
     todo = np.arange(len(q))
-    for _ in range(4 * int(np.sqrt(len(simp))) + 16):
+    for _ in range(len(simp) + 1):
         if not len(todo):
-            return out
+            break
         s = simp[cur[todo]]
         a, b, c, p = pts[s[:, 0]], pts[s[:, 1]], pts[s[:, 2]], q[todo]
-        orient = np.sign(_cross(b - a, c - a))
-        lam = np.stack([_cross(b - p, c - p), _cross(c - p, a - p), _cross(a - p, b - p)], 1) * orient[:, None]
-        inside = (orient != 0) & (lam >= 0).all(1)
+        lam = np.stack([_cross(b - p, c - p), _cross(c - p, a - p), _cross(a - p, b - p)], 1)
+        inside = (lam >= 0).all(1)
         out[todo[inside]] = cur[todo[inside]]
         step = nbr[cur[todo], np.argmin(lam, 1)]
         move = ~inside & (step >= 0)
         cur[todo[move]] = step[move]
         todo = todo[move]
-    if len(todo):
-        out[todo] = tri.find_simplex(q[todo])
     return out
 
 
@@ -204,16 +250,15 @@ def _within_two(mesh: _Mesh, unit_vertex: np.ndarray, a: np.ndarray, b: np.ndarr
     n = len(mesh.tri.points)
     local = np.full(unit_vertex.max() + 1, -1, np.int64)
     local[mesh.vertex] = np.arange(len(mesh.vertex))
-    s = mesh.tri.simplices
-    e = np.concatenate([s[:, [0, 1]], s[:, [1, 2]], s[:, [2, 0]], s[:, [1, 0]], s[:, [2, 1]], s[:, [0, 2]]])
-    e = np.unique(e[:, 0] * n + e[:, 1])
+    e = mesh.tri.half_edges
+    e = np.sort(e[:, 0] * n + e[:, 1])
     src, dst = e // n, e % n
     deg = np.bincount(src, minlength=n)
     start = np.cumsum(deg) - deg
     # two-hop paths i -> k -> j for every edge (i, k) and every edge (k, j)
     hop = np.repeat(np.arange(len(e)), deg[dst])
     offset = np.arange(len(hop)) - np.repeat(np.cumsum(deg[dst]) - deg[dst], deg[dst])
-    keys = np.unique(np.concatenate([e, src[hop] * n + dst[start[dst[hop]] + offset]]))
+    keys = np.sort(np.concatenate([e, src[hop] * n + dst[start[dst[hop]] + offset]]))
     q = local[unit_vertex[a]] * n + local[unit_vertex[b]]
     pos = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
     return keys[pos] == q
