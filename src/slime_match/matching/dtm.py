@@ -3,15 +3,32 @@
 ALGORITHMS.md section 4. Matches are first grouped into *units*, the distinct pairs of rounded positions
 (v0, v1): duplicated matches share their fate. Two units are *near* in an image when they sit on the same
 vertex or on two Delaunay-adjacent non-border vertices; they are consistent when near in both images and
-inconsistent when near in exactly one. Contraction repeatedly removes, walking the units by rank, the
-inconsistent neighbours of every surviving unit, then drops survivors without a surviving consistent
-neighbour. Expansion walks the removal iterations from the last to the first; at each it re-triangulates
-the kept units and puts back every unit removed at that iteration or later (so a unit rejected by a coarse
-mesh gets another chance on the denser ones) whose position is predicted in both directions: its point
-lies in the image of the kept triangle containing its other point (border triangles: border corners
-mapped by the local affine fit of the nearest kept vertex's neighbourhood).
+inconsistent when near in one image and more than two Delaunay edges apart in the other. Contraction
+repeatedly removes, walking the units by rank, the inconsistent neighbours of every surviving unit, then
+drops survivors without a surviving consistent neighbour. Expansion walks the removal iterations from the
+last to the first; at each it re-triangulates the kept units and puts back every unit removed at that
+iteration or later (so a unit rejected by a coarse mesh gets another chance on the denser ones) whose
+position is predicted in both directions: its point lies in the image of the kept triangle containing its
+other point (border triangles: border corners mapped by the local affine fit of the nearest kept vertex's
+neighbourhood).
 
-Everything is sparse: adjacency as sorted int64 pair keys, point location with ``Delaunay.find_simplex``.
+Deviations from the spec, all for low inlier ratios and strong viewpoint changes (Oxford graf 1->4 Blob
+candidates, ~6-20% correct, used to collapse to 2 matches):
+
+- *Flip tolerance.* Near in one image but two edges apart in the other (through any vertex, border ones
+  included) is neither consistent nor inconsistent: under perspective a Delaunay edge between two correct
+  matches is often flipped in the other image, and an edge over an empty area may pass on the other side
+  of a carving keypoint. Counting these as inconsistent made correct matches remove each other, iteration
+  after iteration, down to a handful.
+- *Rank.* Units are ranked by the number of consistent neighbours (descending), then by score (ascending);
+  the spec's order (score, ties by count) never uses the count on continuous Blob scores, and the
+  best-scored outliers, which are the majority there, removed the inliers around them.
+- *Settling.* Contraction stops after an iteration that removes fewer than ``settle_fraction`` of the
+  alive units: the long tail of iterations removing a few units each costs most of the time and expansion
+  restores the same final set.
+
+Everything is sparse: adjacency as sorted int64 pair keys, OpenCV's incremental Delaunay (``Subdiv2D``,
+several times faster than Qhull on integer positions), vectorised point location by a visibility walk.
 """
 
 from __future__ import annotations
@@ -471,7 +488,7 @@ class _Units:
                 only1[~_within_two(mesh[0], self.uv[0], only1 // n_units, only1 % n_units)]]))
             n_consistent = np.bincount(consistent // n_units, minlength=n_units)
             rank = np.empty(n_units, np.int64)
-            rank[np.lexsort((-n_consistent, self.score))] = np.arange(n_units)
+            rank[np.lexsort((self.score, -n_consistent))] = np.arange(n_units)
             a, b = inconsistent // n_units, inconsistent % n_units
             better = rank[a] < rank[b]
             survive = _greedy_survivors(a[better], b[better], self.alive)
