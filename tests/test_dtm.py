@@ -8,6 +8,7 @@ from conftest import require
 from scipy.spatial import Delaunay
 
 from slime_match.errors import ConfigError
+from slime_match.eval.metrics import correct_matches_homography
 from slime_match.matching import dtm as dtm_module
 from slime_match.matching.blob import blob_match
 from slime_match.matching.dtm import DTMConfig, DTMResult, dtm_filter
@@ -170,3 +171,24 @@ def test_real_pair_blob_then_dtm(data_dir):
     assert correct.sum() > 500 and correct.mean() < 0.5
     assert res.keep[correct].mean() > 0.9
     assert correct[res.keep].mean() > 0.8
+
+
+def test_real_pair_low_inlier_ratio_does_not_collapse(data_dir):
+    """Oxford graf 1-4 (strong viewpoint change): < 10% of the Blob candidates are correct; DTM must keep
+    most of them (it used to collapse to 2 matches) with a high precision."""
+    folder = require(data_dir / "oxford_graf")
+    hom = np.loadtxt(folder / "H1to4p")
+    feats = []
+    for name in ("img1.png", "img4.png"):
+        img = cv2.imread(str(folder / name), cv2.IMREAD_GRAYSCALE)
+        kp, desc = cv2.SIFT_create(3000).detectAndCompute(img, None)
+        desc = np.sqrt(desc / np.maximum(desc.sum(1, keepdims=True), 1e-9))
+        feats.append((np.array([p.pt for p in kp]), torch.from_numpy(desc).float(), img.shape))
+    (xy0, d0, size0), (xy1, d1, size1) = feats
+    cand = blob_match(d0, d1, torch.from_numpy(xy0), torch.from_numpy(xy1))
+    correct = correct_matches_homography(xy0[cand.idx0], xy1[cand.idx1], hom, t=15)
+    unmatched = [np.delete(xy, np.unique(idx), 0) for xy, idx in ((xy0, cand.idx0), (xy1, cand.idx1))]
+    res = dtm_filter(xy0[cand.idx0], xy1[cand.idx1], cand.scores, size0, size1, *unmatched)
+    assert correct.sum() > 300 and correct.mean() < 0.15
+    assert correct[res.keep].sum() > 0.6 * correct.sum()
+    assert correct[res.keep].mean() > 0.85
