@@ -23,8 +23,8 @@ candidates, ~6-20% correct, used to collapse to 2 matches):
 - *Rank.* Units are ranked by the number of consistent neighbours (descending), then by score (ascending);
   the spec's order (score, ties by count) never uses the count on continuous Blob scores, and the
   best-scored outliers, which are the majority there, removed the inliers around them.
-- *Settling.* Contraction stops after an iteration that removes fewer than ``settle_fraction`` of the
-  alive units: the long tail of iterations removing a few units each costs most of the time and expansion
+- *Settling.* Contraction stops at an iteration that would remove fewer than ``settle_fraction`` of the
+  alive units (and does not remove them): the long tail of iterations removing a few units each costs most of the time and expansion
   restores the same final set.
 
 Everything is sparse: adjacency as sorted int64 pair keys, OpenCV's incremental Delaunay (``Subdiv2D``,
@@ -55,8 +55,8 @@ class DTMConfig:
         border_spacing: spacing of the border ring vertices, as a multiple of sqrt(W * H / n_vertices).
         inside_tolerance: pixels by which a point may fall outside the predicted triangle in expansion.
         max_iterations: safety bound on contraction iterations.
-        settle_fraction: contraction stops after an iteration that removes fewer than this fraction of the
-            alive units (0: only when nothing is removed, as in the spec).
+        settle_fraction: contraction stops, keeping the alive units, at an iteration that would remove fewer
+            than this fraction of them (0: only when nothing is removed, as in the spec).
     """
 
     border_spacing: float = 1.0
@@ -496,14 +496,11 @@ class _Units:
             supported = np.zeros(n_units, bool)
             supported[ca[survive[ca] & survive[cb]]] = True
             removed = self.alive & ~(survive & supported)
-            if not removed.any():
+            if not removed.any() or removed.sum() < self.cfg.settle_fraction * self.alive.sum():
                 break
             removed_at[removed] = iteration
-            n_alive = self.alive.sum()
             self.alive &= ~removed
             iteration += 1
-            if removed.sum() < self.cfg.settle_fraction * n_alive:
-                break
         return removed_at, iteration
 
     def expand(self, removed_at: np.ndarray, iterations: int) -> np.ndarray:
