@@ -1,3 +1,29 @@
-"""slime-match: image matching by bare homography (Slime) and its base pipelines."""
+"""slime-match: image matching by bare homography (Slime) and its base pipelines (Hz+, RootSIFT).
+
+Example:
+    >>> import slime_match as sm
+    >>> result = sm.match("a.jpg", "b.jpg")                  # Slime on Hz+
+    >>> result.keypoints0, result.keypoints1, result.scores  # (K, 2), (K, 2), (K,)
+"""
 
 __version__ = "0.1.0"
+
+from .config import MatchConfig, make_config  # noqa: E402
+from .errors import ConfigError, ImageError, SlimeMatchError, WeightsNotFoundError  # noqa: E402
+from .io import load_image  # noqa: E402
+from .matcher import Matcher, match  # noqa: E402
+from .result import MatchResult  # noqa: E402
+
+__all__ = [
+    "ConfigError",
+    "ImageError",
+    "MatchConfig",
+    "MatchResult",
+    "Matcher",
+    "SlimeMatchError",
+    "WeightsNotFoundError",
+    "__version__",
+    "load_image",
+    "make_config",
+    "match",
+]

@@ -43,34 +43,43 @@ def _options(args: argparse.Namespace) -> dict:
     return {key: getattr(args, key) for key in keys}
 
 
-def cmd_match(args: argparse.Namespace) -> int:
+def _config(args: argparse.Namespace):
     from .config import make_config
-    from .io import load_image, save_json, save_npz
-    from .matcher import Matcher
-    from .viz import plot_matches
 
     preset = args.method
     options = _options(args)
     if args.method == "slime" and options["base"] == "rootsift":
         preset, options["base"] = "slime-rootsift", None
     config = make_config(preset, **options)
-    if args.save_stages:
+    if getattr(args, "save_stages", False):
         config.slime.keep_stages = True
-    result = Matcher(config)(args.image0, args.image1)
-    out = Path(args.output)
+    return config
+
+
+def _write_outputs(result, image0, image1, out: Path, plot: bool = True) -> None:
+    """matches.npz, summary.json, matches.png (and stages.npz) into ``out``, all or nothing.
+
+    ``image0`` / ``image1`` are the loaded (H, W, 3) float images (for the picture).
+    """
+    from .io import save_json, save_npz
+    from .viz import plot_matches
+
     out.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(dir=out, prefix=".staging-"))
     try:
         save_npz(staging / "matches.npz", **result.arrays())
         save_json(staging / "summary.json", result.summary)
-        if not args.no_plot:
-            plot_matches(load_image(args.image0), load_image(args.image1), result, staging / "matches.png")
-        if args.save_stages and result.stages is not None:
+        if plot:
+            plot_matches(image0, image1, result, staging / "matches.png")
+        if result.stages is not None:
             save_npz(staging / "stages.npz", **result.stages)
         for item in staging.iterdir():
             os.replace(item, out / item.name)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+
+
+def _report(result, out: Path) -> None:
     counts = result.summary["counts"]
     line = f"{counts['matches']} matches"
     if "inliers" in counts:
@@ -78,7 +87,59 @@ def cmd_match(args: argparse.Namespace) -> int:
     print(f"{line} in {result.summary['seconds']['total']:.2f} s -> {out}/matches.npz")
     for warning in result.summary.get("warnings", []):
         print(f"warning: {warning}", file=sys.stderr)
+
+
+def cmd_match(args: argparse.Namespace) -> int:
+    from .io import load_image
+    from .matcher import Matcher
+
+    config = _config(args)
+    image0, image1 = load_image(args.image0), load_image(args.image1)  # bad input fails before model loading
+    result = Matcher(config)(image0, image1)
+    out = Path(args.output)
+    _write_outputs(result, image0, image1, out, plot=not args.no_plot)
+    _report(result, out)
     return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """Match scikit-image's Middlebury motorcycle stereo pair and score it with its disparity map."""
+    import numpy as np
+    from skimage.data import stereo_motorcycle
+
+    from .eval.metrics import disparity_error
+    from .matcher import Matcher
+
+    left, right, disparity = stereo_motorcycle()
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [out / "motorcycle_left.png", out / "motorcycle_right.png"]
+    for path, image in zip(paths, (left, right)):
+        _write_rgb(path, image)
+    image0, image1 = left.astype(np.float32) / 255.0, right.astype(np.float32) / 255.0
+    result = Matcher(_config(args))(image0, image1)
+    error = disparity_error(result.keypoints0, result.keypoints1, disparity)
+    known = np.isfinite(error)
+    correct = known & (error < 15.0)
+    result.summary["ground_truth"] = {
+        "matches_with_known_disparity": int(known.sum()),
+        "correct_15px": int(correct.sum()),
+        "precision": float(correct.sum() / max(int(known.sum()), 1)),
+    }
+    _write_outputs(result, image0, image1, out)
+    _report(result, out)
+    gt = result.summary["ground_truth"]
+    print(f"ground truth (disparity): {gt['correct_15px']} of {gt['matches_with_known_disparity']} matches "
+          f"correct within 15 px, precision {gt['precision']:.3f}")
+    return 0
+
+
+def _write_rgb(path: Path, rgb) -> None:
+    """Write an (H, W, 3) uint8 RGB array as an image file."""
+    import cv2
+
+    if not cv2.imwrite(str(path), rgb[:, :, ::-1]):
+        raise OSError(f"could not write {path}")
 
 
 def cmd_viz(args: argparse.Namespace) -> int:
@@ -103,6 +164,11 @@ def build_parser() -> argparse.ArgumentParser:
     match.add_argument("--no-plot", action="store_true", help="skip matches.png")
     _add_match_options(match)
     match.set_defaults(func=cmd_match)
+
+    demo = sub.add_parser("demo", help="match a bundled real stereo pair (Middlebury motorcycle) and score it")
+    demo.add_argument("-o", "--output", default="slime_demo", help="output folder (default slime_demo/)")
+    _add_match_options(demo)
+    demo.set_defaults(func=cmd_demo)
 
     viz = sub.add_parser("viz", help="draw Slime stages saved by `slime match --save-stages`")
     viz.add_argument("stages", help="stages.npz")

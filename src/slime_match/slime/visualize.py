@@ -1,0 +1,96 @@
+"""Pictures of Slime's stages (``slime viz``), like the paper's figures: blocks/tiles, planes, sets, final."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Rectangle  # noqa: E402
+
+from ..errors import SlimeMatchError  # noqa: E402
+from ..io import load_image, save_figure  # noqa: E402
+from ..viz import draw_matches, side_by_side  # noqa: E402
+
+STAGES = ("blocks", "tiles", "planes", "superset", "fbar", "ftheta", "tile_matches", "final")
+
+
+def _set_colors(labels: np.ndarray, seed: int = 0) -> np.ndarray:
+    """(K, 3) one random bright colour per distinct label."""
+    count = int(labels.max(initial=0)) + 1
+    palette = plt.cm.hsv(np.linspace(0.0, 1.0, count, endpoint=False))[:, :3]
+    return palette[np.random.default_rng(seed).permutation(count)][labels]
+
+
+def _sets_to_rows(stages: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(entries,) table rows and set index of every entry of a saved TileSets."""
+    indptr = stages[f"{name}_indptr"]
+    return stages[f"{name}_indices"], np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+
+
+def _draw_boxes(ax, boxes: np.ndarray, offset: float) -> None:
+    colors = ("tab:blue", "tab:orange", "tab:red", "tab:green")
+    for x0, y0, x1, y1, scale in boxes:
+        ax.add_patch(Rectangle((x0 + offset, y0), x1 - x0, y1 - y0, fill=False, lw=0.8,
+                               edgecolor=colors[int(scale) % len(colors)]))
+
+
+def render_stages(stages_path: str | os.PathLike, image0, image1, out_dir: str | os.PathLike,
+                  stages: list[str] | None = None) -> list[Path]:
+    """Draw the stages saved by ``slime match --save-stages`` into one PNG each.
+
+    Args:
+        stages_path: the ``stages.npz``.
+        image0, image1: the two images (paths or arrays), as matched.
+        out_dir: folder for ``<stage>.png``.
+        stages: stage names among :data:`STAGES` (all when None).
+
+    Returns:
+        The written PNG paths.
+    """
+    names = list(stages or STAGES)
+    unknown = sorted(set(names) - set(STAGES))
+    if unknown:
+        raise SlimeMatchError(f"unknown stage(s) {', '.join(unknown)}: choose among {', '.join(STAGES)}")
+    path = Path(stages_path)
+    if not path.is_file():
+        raise SlimeMatchError(f"{path}: no such stages file (write it with `slime match --save-stages`)")
+    data = dict(np.load(path))
+    img0, img1 = load_image(image0), load_image(image1)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name in names:
+        figure, ax = plt.subplots(figsize=(12, 12 * max(img0.shape[0], img1.shape[0])
+                                           / (img0.shape[1] + img1.shape[1]) + 0.4))
+        if name in ("blocks", "tiles"):
+            canvas, offset = side_by_side(img0, img1)
+            ax.imshow(canvas)
+            ax.set_axis_off()
+            _draw_boxes(ax, data[f"{name}0"], 0.0)
+            _draw_boxes(ax, data[f"{name}1"], offset)
+            ax.set_title(f"{name}: {len(data[f'{name}0'])} / {len(data[f'{name}1'])} (cores, colour = scale)",
+                         fontsize=9)
+        elif name == "planes":
+            plane = data["block_matches_plane"]
+            draw_matches(ax, img0, img1, data["block_matches_xy0"], data["block_matches_xy1"],
+                         _set_colors(plane), title=f"block-pair planes M_l: {len(data['planes_H'])} planes, "
+                                                  f"{len(plane)} matches (colour = plane)")
+        elif name in ("superset", "fbar", "ftheta"):
+            rows, set_id = _sets_to_rows(data, name)
+            titles = {"superset": "superset H", "fbar": "F-bar", "ftheta": "F^theta (fused, oriented)"}
+            draw_matches(ax, img0, img1, data["table_xy0"][rows], data["table_xy1"][rows], _set_colors(set_id),
+                         title=f"{titles[name]}: {int(set_id.max(initial=-1)) + 1} sets, {len(rows)} entries")
+        else:
+            key = "tile_matches" if name == "tile_matches" else "final"
+            draw_matches(ax, img0, img1, data[f"{key}_xy0"], data[f"{key}_xy1"],
+                         title=f"{name}: {len(data[f'{key}_xy0'])} matches")
+        target = out / f"{name}.png"
+        save_figure(target, figure)
+        plt.close(figure)
+        written.append(target)
+    return written

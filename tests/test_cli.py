@@ -1,0 +1,148 @@
+"""The `slime` command line: outputs, options, and bad input (clear one-line errors, never a traceback)."""
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+from skimage.data import stereo_motorcycle
+
+from slime_match.cli import main
+
+WEIGHT_FREE = ["--shape", "baumberg", "--orientation", "gradient", "--descriptor", "rootsift"]
+
+
+@pytest.fixture(scope="module")
+def pair(tmp_path_factory):
+    """A real stereo pair (scikit-image's Middlebury motorcycle), halved for speed."""
+    folder = tmp_path_factory.mktemp("pair")
+    left, right, _ = stereo_motorcycle()
+    paths = []
+    for name, image in (("left.png", left), ("right.png", right)):
+        small = cv2.resize(image, (370, 250), interpolation=cv2.INTER_AREA)
+        cv2.imwrite(str(folder / name), small[:, :, ::-1])
+        paths.append(str(folder / name))
+    return paths
+
+
+def _run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_match_writes_all_outputs(pair, tmp_path, capsys):
+    code, out, err = _run(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift")
+    assert code == 0, err
+    assert "matches" in out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["matches.npz", "matches.png", "summary.json"]
+    data = np.load(tmp_path / "matches.npz")
+    assert set(data.files) == {"keypoints0", "keypoints1", "scores"}
+    k = len(data["scores"])
+    assert k > 100 and data["keypoints0"].shape == (k, 2) and data["keypoints0"].dtype == np.float64
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["method"] == "rootsift" and summary["counts"]["matches"] == k
+    assert {"features", "matching", "total"} <= set(summary["seconds"])
+    assert summary["config"]["base"]["fginn_ratio"] == 0.8
+
+
+@pytest.mark.parametrize("ransac, key", [("fundamental", "F"), ("homography", "H"), ("magsac-fundamental", "F")])
+def test_ransac_outputs(pair, tmp_path, capsys, ransac, key):
+    code, out, err = _run(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift", "--ransac", ransac,
+                          "--threshold", "3", "--no-plot")
+    assert code == 0, err
+    data = np.load(tmp_path / "matches.npz")
+    assert data[key].shape == (3, 3) and data["inliers"].dtype == bool
+    assert 0 < data["inliers"].sum() <= len(data["scores"])
+    assert "inliers" in out
+
+
+def test_hz_plus_weight_free(pair, tmp_path, capsys):
+    code, _, err = _run(capsys, "match", *pair, "-o", tmp_path, "--method", "hz+", *WEIGHT_FREE, "--no-plot")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["pipeline"]["descriptor"] == "rootsift" and summary["pipeline"]["shape"] == "baumberg"
+    assert summary["counts"]["matches"] > 50
+
+
+def test_slime_stages_and_viz(pair, tmp_path, capsys):
+    code, _, err = _run(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--save-stages", "--no-plot")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["method"] == "slime" and summary["counts"]["matches"] > 0
+    assert {"block_pairs", "expansion", "plane_selection", "global_dtm"} <= set(summary["seconds"])
+    stages = np.load(tmp_path / "stages.npz")
+    assert stages["final_xy0"].shape == (summary["counts"]["matches"], 2)
+    code, out, err = _run(capsys, "viz", tmp_path / "stages.npz", *pair, "-o", tmp_path / "viz")
+    assert code == 0, err
+    assert {p.name for p in (tmp_path / "viz").iterdir()} == {
+        f"{s}.png" for s in ("blocks", "tiles", "planes", "superset", "fbar", "ftheta", "tile_matches", "final")}
+
+
+def test_blank_image_gives_explicit_empty_result(pair, tmp_path, capsys):
+    blank = tmp_path / "blank.png"
+    cv2.imwrite(str(blank), np.full((200, 300, 3), 128, np.uint8))
+    for method in (["--method", "rootsift"], ["--method", "hz+", *WEIGHT_FREE], WEIGHT_FREE):
+        out_dir = tmp_path / "out"
+        code, _, err = _run(capsys, "match", blank, pair[0], "-o", out_dir, *method)
+        assert code == 0, err
+        data = np.load(out_dir / "matches.npz")
+        assert data["keypoints0"].shape == (0, 2) and data["scores"].shape == (0,)
+        assert json.loads((out_dir / "summary.json").read_text())["counts"]["matches"] == 0
+
+
+def test_identical_images_match_in_place(pair, tmp_path, capsys):
+    code, _, err = _run(capsys, "match", pair[0], pair[0], "-o", tmp_path, "--method", "rootsift", "--no-plot")
+    assert code == 0, err
+    data = np.load(tmp_path / "matches.npz")
+    shift = np.linalg.norm(data["keypoints0"] - data["keypoints1"], axis=1)
+    assert len(shift) > 100 and np.mean(shift < 1.0) > 0.95
+
+
+def test_grey_rgba_and_16bit_inputs(pair, tmp_path, capsys):
+    left = cv2.imread(pair[0])
+    variants = {"grey.png": cv2.cvtColor(left, cv2.COLOR_BGR2GRAY), "rgba.png": cv2.cvtColor(left, cv2.COLOR_BGR2BGRA),
+                "deep.png": left.astype(np.uint16) * 257}
+    for name, image in variants.items():
+        cv2.imwrite(str(tmp_path / name), image)
+        code, _, err = _run(capsys, "match", tmp_path / name, pair[1], "-o", tmp_path / name[:-4], "--method",
+                            "rootsift", "--no-plot")
+        assert code == 0, err
+        assert len(np.load(tmp_path / name[:-4] / "matches.npz")["scores"]) > 50
+
+
+@pytest.mark.parametrize("case", ["missing", "not_image", "tiny", "directory"])
+def test_bad_input_one_line_error_no_output(pair, tmp_path, capsys, case):
+    bad = {"missing": tmp_path / "nope.png", "not_image": tmp_path / "notes.png", "tiny": tmp_path / "tiny.png",
+           "directory": tmp_path}[case]
+    (tmp_path / "notes.png").write_text("not an image")
+    cv2.imwrite(str(tmp_path / "tiny.png"), np.zeros((16, 16, 3), np.uint8))
+    out_dir = tmp_path / "out"
+    code, out, err = _run(capsys, "match", bad, pair[1], "-o", out_dir, "--method", "rootsift")
+    assert code == 2
+    assert err.startswith("error: ") and err.count("\n") == 1 and "Traceback" not in err
+    assert not out_dir.exists()
+
+
+def test_bad_options_and_missing_gpu(pair, tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["match", *pair, "-o", str(tmp_path), "--descriptor", "sift2"])
+    code, _, err = _run(capsys, "match", *pair, "-o", tmp_path, "--threshold", "-1", "--method", "rootsift")
+    assert code == 2 and "threshold" in err
+    import torch
+
+    if not torch.cuda.is_available():
+        code, _, err = _run(capsys, "match", *pair, "-o", tmp_path, "--device", "cuda", "--method", "rootsift")
+        assert code == 2 and "no CUDA" in err
+
+
+def test_viz_bad_input(tmp_path, capsys, pair):
+    code, _, err = _run(capsys, "viz", tmp_path / "none.npz", *pair, "-o", tmp_path)
+    assert code == 2 and "no such stages file" in err
+
+
+def test_demo_scores_the_real_pair(tmp_path, capsys):
+    code, out, err = _run(capsys, "demo", "-o", tmp_path, "--method", "rootsift")
+    assert code == 0, err
+    gt = json.loads((tmp_path / "summary.json").read_text())["ground_truth"]
+    assert gt["precision"] > 0.8 and "precision" in out

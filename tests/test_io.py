@@ -1,0 +1,82 @@
+"""Image loading of every bit depth / channel layout, and atomic result files."""
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from slime_match.errors import ImageError
+from slime_match.io import load_image, save_json, save_npz
+
+
+def _gradient(h=40, w=50):
+    y, x = np.mgrid[0:h, 0:w]
+    return (x * 255 / (w - 1)).astype(np.uint8), y
+
+
+@pytest.mark.parametrize("kind", ["grey", "rgb", "rgba", "grey16", "float"])
+def test_load_file_any_depth_and_channels(tmp_path, kind):
+    g, _ = _gradient()
+    image = {
+        "grey": g,
+        "rgb": np.dstack([g, g, g]),
+        "rgba": np.dstack([g, g, g, np.full_like(g, 7)]),
+        "grey16": g.astype(np.uint16) * 257,
+        "float": None,
+    }[kind]
+    if image is None:
+        loaded = load_image(g.astype(np.float32) / 255.0)
+    else:
+        path = tmp_path / "image.png"
+        cv2.imwrite(str(path), image)
+        loaded = load_image(path)
+    assert loaded.shape == (40, 50, 3) and loaded.dtype == np.float32
+    assert loaded[:, 0].max() == 0.0 and abs(loaded[:, -1].min() - 1.0) < 1e-6
+
+
+def test_rgb_order_is_kept(tmp_path):
+    image = np.zeros((40, 40, 3), np.uint8)
+    image[..., 0] = 255  # red in RGB
+    cv2.imwrite(str(tmp_path / "red.png"), image[..., ::-1])  # OpenCV writes BGR
+    assert load_image(tmp_path / "red.png")[0, 0].tolist() == [1.0, 0.0, 0.0]
+
+
+def test_tensor_inputs():
+    chw = torch.rand(3, 36, 48)
+    assert np.allclose(load_image(chw), chw.permute(1, 2, 0).numpy())
+    assert load_image(torch.rand(1, 36, 48)).shape == (36, 48, 3)
+
+
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda p: p / "missing.png", "no such file"),
+        (lambda p: p, "directory"),
+        (lambda p: (p / "notes.txt").write_text("hello") and p / "notes.txt", "not a readable image"),
+        (lambda p: (p / "empty.png").write_bytes(b"") or p / "empty.png", "not a readable image"),
+    ],
+)
+def test_bad_files_raise_clear_errors(tmp_path, make, message):
+    with pytest.raises(ImageError, match=message):
+        load_image(make(tmp_path))
+
+
+def test_tiny_and_malformed_arrays():
+    with pytest.raises(ImageError, match="smaller than 32"):
+        load_image(np.zeros((20, 100), np.uint8))
+    with pytest.raises(ImageError, match="expected"):
+        load_image(np.zeros((40, 40, 2), np.uint8))
+    with pytest.raises(ImageError, match="unsupported image type"):
+        load_image([[1, 2], [3, 4]])
+
+
+def test_atomic_writers_leave_no_partial_file(tmp_path):
+    save_npz(tmp_path / "a.npz", x=np.arange(3))
+    save_json(tmp_path / "a.json", {"v": np.float32(1.5), "arr": np.arange(2)})
+    assert np.load(tmp_path / "a.npz")["x"].tolist() == [0, 1, 2]
+    assert json.loads((tmp_path / "a.json").read_text()) == {"v": 1.5, "arr": [0, 1]}
+    with pytest.raises(TypeError):
+        save_json(tmp_path / "b.json", {"bad": object()})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "a.npz"]
