@@ -135,7 +135,7 @@ def test_delaunay_and_locate_match_scipy():
     g = np.random.default_rng(0)
     pts = np.unique(np.rint(g.uniform(0, 300, (500, 2))), axis=0)
     pts = np.r_[pts, [[-1, -1], [301, -1], [301, 301], [-1, 301]]]
-    tri = dtm_module._delaunay(pts)
+    tri = dtm_module._Triangulation.of(pts)
     ref = Delaunay(pts)
     # same triangle count and area as Qhull (ties between cocircular points may flip a few edges)
     area = lambda s: np.abs(dtm_module._cross(pts[s[:, 1]] - pts[s[:, 0]], pts[s[:, 2]] - pts[s[:, 0]])).sum()

@@ -99,26 +99,9 @@ class DTMResult:
     restored: np.ndarray
 
 
-@dataclass
-class _Triangulation:
-    """A planar Delaunay triangulation (SciPy's ``Delaunay`` layout, without Qhull's per-call overhead).
-
-    Attributes:
-        points: (P, 2) float64 integer-valued vertex positions.
-        simplices: (T, 3) int64 counter-clockwise (in x-right, y-down pixel axes: positive cross product)
-            vertex indices.
-        neighbors: (T, 3) triangle across the edge facing each corner, -1 on the hull.
-        half_edges: (3 T + B, 2) directed Delaunay edges, each neighbouring pair once in each direction.
-    """
-
-    points: np.ndarray
-    simplices: np.ndarray
-    neighbors: np.ndarray
-    half_edges: np.ndarray
-
-
-def _delaunay(points: np.ndarray) -> _Triangulation:
-    """Delaunay triangulation of unique integer-valued points (OpenCV's incremental Subdiv2D).
+def _delaunay(points: np.ndarray) -> np.ndarray:
+    """(T, 3) int64 Delaunay triangles of unique integer-valued points (OpenCV's incremental Subdiv2D),
+    counter-clockwise in x-right, y-down pixel axes (positive cross product).
 
     Args:
         points: (P, 2) float64 unique integer positions, P >= 3 and not all collinear.
@@ -136,17 +119,40 @@ def _delaunay(points: np.ndarray) -> _Triangulation:
     a, b, c = points[simp[:, 0]], points[simp[:, 1]], points[simp[:, 2]]
     flip = _cross(b - a, c - a) < 0
     simp[flip] = simp[flip][:, [0, 2, 1]]
-    # edge facing corner k is (k + 1, k + 2); its twin runs the other way in the neighbouring triangle
-    half = np.stack([simp[:, [1, 2, 0]], simp[:, [2, 0, 1]]], 2).reshape(-1, 2)
-    n = len(points)
-    undirected = np.minimum(half[:, 0], half[:, 1]) * n + np.maximum(half[:, 0], half[:, 1])
-    order = np.argsort(undirected, kind="stable")
-    twin = np.full(len(half), -1, np.int64)
-    same = undirected[order][1:] == undirected[order][:-1]
-    twin[order[1:][same]], twin[order[:-1][same]] = order[:-1][same], order[1:][same]
-    neighbors = np.where(twin >= 0, twin // 3, -1).reshape(-1, 3)
-    hull = half[twin < 0][:, ::-1]
-    return _Triangulation(points, simp, neighbors, np.concatenate([half, hull]))
+    return simp
+
+
+@dataclass
+class _Triangulation:
+    """A planar Delaunay triangulation with its topology (SciPy's ``Delaunay`` layout).
+
+    Attributes:
+        points: (P, 2) float64 integer-valued vertex positions.
+        simplices: (T, 3) int64 counter-clockwise vertex indices (see ``_delaunay``).
+        neighbors: (T, 3) triangle across the edge facing each corner, -1 on the hull.
+        half_edges: (3 T + B, 2) directed Delaunay edges, each neighbouring pair once in each direction.
+    """
+
+    points: np.ndarray
+    simplices: np.ndarray
+    neighbors: np.ndarray
+    half_edges: np.ndarray
+
+    @classmethod
+    def of(cls, points: np.ndarray) -> _Triangulation:
+        """Triangulate unique integer-valued (P, 2) points and link the triangles."""
+        simp = _delaunay(points)
+        # edge facing corner k is (k + 1, k + 2); its twin runs the other way in the neighbouring triangle
+        half = np.stack([simp[:, [1, 2, 0]], simp[:, [2, 0, 1]]], 2).reshape(-1, 2)
+        n = len(points)
+        undirected = np.minimum(half[:, 0], half[:, 1]) * n + np.maximum(half[:, 0], half[:, 1])
+        order = np.argsort(undirected, kind="stable")
+        twin = np.full(len(half), -1, np.int64)
+        same = undirected[order][1:] == undirected[order][:-1]
+        twin[order[1:][same]], twin[order[:-1][same]] = order[:-1][same], order[1:][same]
+        neighbors = np.where(twin >= 0, twin // 3, -1).reshape(-1, 3)
+        hull = half[twin < 0][:, ::-1]
+        return cls(points, simp, neighbors, np.concatenate([half, hull]))
 
 
 @dataclass
@@ -167,12 +173,11 @@ class _Mesh:
 def _border_ring(size: tuple[int, int], n_vertices: int, scale: float) -> np.ndarray:
     """(R, 2) integer points along the four image sides, 1 px outside the pixel grid."""
     h, w = size
-    step = max(scale * np.sqrt(w * h / max(n_vertices, 1)), 1.0)
-    xs = np.unique(np.rint(np.linspace(-1.0, w, max(int(np.ceil((w + 1) / step)), 1) + 1)))
-    ys = np.unique(np.rint(np.linspace(-1.0, h, max(int(np.ceil((h + 1) / step)), 1) + 1)))[1:-1]
-    top, bottom = np.c_[xs, np.full_like(xs, -1.0)], np.c_[xs, np.full_like(xs, float(h))]
-    left, right = np.c_[np.full_like(ys, -1.0), ys], np.c_[np.full_like(ys, float(w)), ys]
-    return np.concatenate([top, bottom, left, right])
+    step = max(int(round(scale * np.sqrt(w * h / max(n_vertices, 1)))), 1)
+    xs = np.r_[np.arange(-1, w, step), w].astype(np.float64)
+    ys = np.arange(step - 1, h, step, dtype=np.float64)
+    return np.concatenate([np.c_[xs, np.full_like(xs, -1.0)], np.c_[xs, np.full_like(xs, float(h))],
+                           np.c_[np.full_like(ys, -1.0), ys], np.c_[np.full_like(ys, float(w)), ys]])
 
 
 def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int],
@@ -193,12 +198,12 @@ def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int
     if unmatched is not None and len(unmatched):
         free = unmatched[~np.isin(_row_keys(unmatched, size), _row_keys(pts, size))]
         first_free = n + len(border)
-        s = _delaunay(np.concatenate([pts, border, free])).simplices
+        s = _delaunay(np.concatenate([pts, border, free]))
         ring_tri = s[((s >= n) & (s < first_free)).any(1)]
         carved = np.zeros(len(free), bool)
         carved[ring_tri[ring_tri >= first_free] - first_free] = True
         border = np.concatenate([border, free[carved]])
-    tri = _delaunay(np.concatenate([pts, border]))
+    tri = _Triangulation.of(np.concatenate([pts, border]))
     e = tri.half_edges
     e = e[(e[:, 0] < e[:, 1]) & (e[:, 1] < n)]
     return _Mesh(tri, vertex, e)
