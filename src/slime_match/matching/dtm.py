@@ -174,10 +174,11 @@ def _border_ring(size: tuple[int, int], n_vertices: int, scale: float) -> np.nda
     """(R, 2) integer points along the four image sides, 1 px outside the pixel grid."""
     h, w = size
     step = max(int(round(scale * np.sqrt(w * h / max(n_vertices, 1)))), 1)
-    xs = np.r_[np.arange(-1, w, step), w].astype(np.float64)
+    xs = np.append(np.arange(-1, w, step), w).astype(np.float64)
     ys = np.arange(step - 1, h, step, dtype=np.float64)
-    return np.concatenate([np.c_[xs, np.full_like(xs, -1.0)], np.c_[xs, np.full_like(xs, float(h))],
-                           np.c_[np.full_like(ys, -1.0), ys], np.c_[np.full_like(ys, float(w)), ys]])
+    x = np.concatenate([xs, xs, np.full_like(ys, -1.0), np.full_like(ys, float(w))])
+    y = np.concatenate([np.full_like(xs, -1.0), np.full_like(xs, float(h)), ys, ys])
+    return np.stack([x, y], 1)
 
 
 def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int],
@@ -190,19 +191,19 @@ def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int
 
     Args:
         vertex: (n,) global ids of the kept vertices; vertex_xy: (V, 2) integer positions of all vertices.
-        unmatched: (U, 2) unique rounded unmatched keypoints of this image, or None.
+        unmatched: (U >= 1, 2) unique rounded unmatched keypoints of this image off all candidate vertices,
+            or None.
     """
     pts = vertex_xy[vertex]
     n = len(pts)
     border = _border_ring(size, n, cfg.border_spacing)
-    if unmatched is not None and len(unmatched):
-        free = unmatched[~np.isin(_row_keys(unmatched, size), _row_keys(pts, size))]
+    if unmatched is not None:
         first_free = n + len(border)
-        s = _delaunay(np.concatenate([pts, border, free]))
+        s = _delaunay(np.concatenate([pts, border, unmatched]))
         ring_tri = s[((s >= n) & (s < first_free)).any(1)]
-        carved = np.zeros(len(free), bool)
+        carved = np.zeros(len(unmatched), bool)
         carved[ring_tri[ring_tri >= first_free] - first_free] = True
-        border = np.concatenate([border, free[carved]])
+        border = np.concatenate([border, unmatched[carved]])
     tri = _Triangulation.of(np.concatenate([pts, border]))
     e = tri.half_edges
     e = e[(e[:, 0] < e[:, 1]) & (e[:, 1] < n)]
@@ -325,10 +326,10 @@ def _local_affine(mesh: _Mesh, src: np.ndarray, dst: np.ndarray) -> tuple[np.nda
         A (n, 2, 2), c (n, 2): dst ~ c + A (x - src[v]) near vertex v.
     """
     n = len(src)
-    glob = np.linalg.lstsq(np.c_[src - src.mean(0), np.ones(n)], dst, rcond=None)[0]
+    glob = np.linalg.lstsq(np.column_stack([src - src.mean(0), np.ones(n)]), dst, rcond=None)[0]
     v = np.concatenate([mesh.edges[:, 0], mesh.edges[:, 1], np.arange(n)])
     w = np.concatenate([mesh.edges[:, 1], mesh.edges[:, 0], np.arange(n)])
-    f = np.c_[src[w] - src[v], np.ones(len(v))]  # (E, 3)
+    f = np.column_stack([src[w] - src[v], np.ones(len(v))])  # (E, 3)
     outer = (f[:, :, None] * f[:, None, :]).reshape(-1, 9)
     cross = (f[:, :, None] * dst[w][:, None, :]).reshape(-1, 6)
     mat = np.stack([np.bincount(v, outer[:, k], n) for k in range(9)], 1).reshape(n, 3, 3)
@@ -391,13 +392,16 @@ def _vertices(xy: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.nda
     h, w = size
     r = np.clip(np.rint(xy), [0, 0], [w - 1, h - 1])
     uniq, inverse = np.unique(_row_keys(r, size), return_inverse=True)
-    return np.c_[uniq % (w + 2), uniq // (w + 2)].astype(np.float64), inverse.reshape(-1)
+    return np.stack([uniq % (w + 2), uniq // (w + 2)], 1).astype(np.float64), inverse.reshape(-1)
 
 
-def _prepare_unmatched(xy: np.ndarray | None, size: tuple[int, int]) -> np.ndarray | None:
+def _prepare_unmatched(xy: np.ndarray | None, size: tuple[int, int], vertex_xy: np.ndarray) -> np.ndarray | None:
+    """(U, 2) unique rounded unmatched keypoints off the candidates' vertices (V, 2), or None if none."""
     if xy is None or len(xy) == 0:
         return None
-    return _vertices(np.asarray(xy, np.float64).reshape(-1, 2), size)[0]
+    free = _vertices(np.asarray(xy, np.float64).reshape(-1, 2), size)[0]
+    free = free[~np.isin(_row_keys(free, size), _row_keys(vertex_xy, size))]
+    return free if len(free) else None
 
 
 def dtm_filter(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0: tuple[int, int],
@@ -431,7 +435,7 @@ def dtm_filter(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0: tupl
     unit_of = unit_of.reshape(-1)
     uscore = np.full(len(unit_keys), np.inf)
     np.minimum.at(uscore, unit_of, scores)
-    unmatched = (_prepare_unmatched(unmatched0, sizes[0]), _prepare_unmatched(unmatched1, sizes[1]))
+    unmatched = (_prepare_unmatched(unmatched0, sizes[0], vxy0), _prepare_unmatched(unmatched1, sizes[1], vxy1))
     pool = ThreadPoolExecutor(2) if k + sum(len(u) for u in unmatched if u is not None) >= _PARALLEL_MIN else None
     try:
         units = _Units((unit_keys // len(vxy1), unit_keys % len(vxy1)), uscore, (vxy0, vxy1), sizes,
@@ -536,7 +540,7 @@ def _representatives(v_this: np.ndarray, uscore: np.ndarray, alive: np.ndarray,
     """(V,) best-scored alive unit on each vertex of this image, -1 where none."""
     units = np.flatnonzero(alive)
     order = units[np.lexsort((uscore[units], v_this[units]))]
-    first = np.r_[True, v_this[order][1:] != v_this[order][:-1]]
+    first = np.append(True, v_this[order][1:] != v_this[order][:-1])
     rep = np.full(n_vertices, -1, np.int64)
     rep[v_this[order[first]]] = order[first]
     return rep
