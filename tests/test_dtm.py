@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 from conftest import require
-from scipy.spatial import Delaunay
+from scipy.spatial import Delaunay, cKDTree
 
 from slime_match.errors import ConfigError
 from slime_match.eval.metrics import correct_matches_homography
@@ -141,7 +141,7 @@ def test_delaunay_and_locate_match_scipy():
     area = lambda s: np.abs(dtm_module._cross(pts[s[:, 1]] - pts[s[:, 0]], pts[s[:, 2]] - pts[s[:, 0]])).sum()
     assert len(tri.simplices) == len(ref.simplices) and area(tri.simplices) == area(ref.simplices)
     q = g.uniform(-0.5, 300.5, (2000, 2))
-    found = dtm_module._locate(tri, q)
+    found = dtm_module._locate(tri, q, cKDTree(pts).query(q)[1])
     assert np.all(found >= 0)
     corners = pts[tri.simplices[found]]  # (P, 3, 2): q inside its triangle (barycentric test)
     lam = np.stack([dtm_module._cross(corners[:, (k + 1) % 3] - q, corners[:, (k + 2) % 3] - q) for k in range(3)], 1)
@@ -149,7 +149,8 @@ def test_delaunay_and_locate_match_scipy():
     # neighbours are symmetric and share an edge
     t, k = np.nonzero(tri.neighbors >= 0)
     assert np.all((tri.neighbors[tri.neighbors[t, k]] == t[:, None]).any(1))
-    assert np.all(dtm_module._locate(tri, np.array([[-50.0, 0.0], [400.0, 400.0]])) == -1)
+    far = np.array([[-50.0, 0.0], [400.0, 400.0]])
+    assert np.all(dtm_module._locate(tri, far, cKDTree(pts).query(far)[1]) == -1)
 
 
 def test_real_pair_blob_then_dtm(data_dir):

@@ -113,11 +113,11 @@ def _delaunay(points: np.ndarray) -> np.ndarray:
     subdiv = cv2.Subdiv2D((int(lo[0]) - far, int(lo[1]) - far, int(span[0]) + 2 * far, int(span[1]) + 2 * far))
     subdiv.insert(points.astype(np.float32))
     corners = np.rint(subdiv.getTriangleList().reshape(-1, 2)).astype(np.int64) - lo
-    keys = (points.astype(np.int64) - lo) @ np.array([1, span[0]])
-    order = np.argsort(keys)
-    simp = order[np.searchsorted(keys[order], corners @ np.array([1, span[0]]))].reshape(-1, 3)
-    a, b, c = points[simp[:, 0]], points[simp[:, 1]], points[simp[:, 2]]
-    flip = _cross(b - a, c - a) < 0
+    index = np.empty(int(span[0] * span[1]), np.int64)  # position -> point lookup, only written cells read
+    index[(points.astype(np.int64) - lo) @ np.array([1, span[0]])] = np.arange(len(points))
+    simp = index[corners @ np.array([1, span[0]])].reshape(-1, 3)
+    d = points[simp[:, 1:]] - points[simp[:, :1]]
+    flip = d[:, 0, 0] * d[:, 1, 1] - d[:, 0, 1] * d[:, 1, 0] < 0
     simp[flip] = simp[flip][:, [0, 2, 1]]
     return simp
 
@@ -210,24 +210,27 @@ def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int
     return _Mesh(tri, vertex, e)
 
 
-def _locate(tri: _Triangulation, q: np.ndarray) -> np.ndarray:
+def _locate(tri: _Triangulation, q: np.ndarray, near: np.ndarray) -> np.ndarray:
     """(P,) index of the triangle containing each query point, -1 outside the hull.
 
-    Vectorised visibility walk from a triangle at the nearest vertex (``tri.neighbors`` across the edge
-    facing the most negative barycentric coordinate); it terminates on Delaunay triangulations.
+    Vectorised visibility walk from a triangle at a vertex near each query (``tri.neighbors`` across the
+    edge facing the most negative barycentric coordinate); it terminates on Delaunay triangulations.
+
+    Args:
+        q: (P, 2) query points; near: (P,) index of a vertex of ``tri`` close to each query.
     """
     pts, simp, nbr = tri.points, tri.simplices, tri.neighbors
     start = np.empty(len(pts), np.int64)
     start[simp.ravel()] = np.repeat(np.arange(len(simp)), 3)
-    cur = start[cKDTree(pts).query(q)[1]]
+    cur = start[near]
     out = np.full(len(q), -1, np.int64)
     todo = np.arange(len(q))
     for _ in range(len(simp) + 1):
         if not len(todo):
             break
-        s = simp[cur[todo]]
-        a, b, c, p = pts[s[:, 0]], pts[s[:, 1]], pts[s[:, 2]], q[todo]
-        lam = np.stack([_cross(b - p, c - p), _cross(c - p, a - p), _cross(a - p, b - p)], 1)
+        d = pts[simp[cur[todo]]] - q[todo, None, :]  # (m, 3, 2) corners relative to the query
+        d1, d2 = d[:, [1, 2, 0]], d[:, [2, 0, 1]]
+        lam = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]  # (m, 3) twice the barycentric areas
         inside = (lam >= 0).all(1)
         out[todo[inside]] = cur[todo[inside]]
         step = nbr[cur[todo], np.argmin(lam, 1)]
@@ -358,7 +361,8 @@ def _transfer_ok(mesh: _Mesh, vertex_xy_src: np.ndarray, rep_dst: np.ndarray, q_
         return np.zeros(len(q_src), bool)
     src_v = vertex_xy_src[mesh.vertex].astype(np.float64)
     dst_v = rep_dst[mesh.vertex]
-    simplex = _locate(tri, q_src)
+    _, nearest = cKDTree(src_v).query(q_src)
+    simplex = _locate(tri, q_src, nearest)
     found = simplex >= 0
     corners = tri.simplices[np.maximum(simplex, 0)]  # (P, 3)
     src_tri = tri.points[corners]
@@ -367,7 +371,6 @@ def _transfer_ok(mesh: _Mesh, vertex_xy_src: np.ndarray, rep_dst: np.ndarray, q_
     dst_tri[is_vertex] = dst_v[corners[is_vertex]]
     if not is_vertex.all():
         affine, offset = _local_affine(mesh, src_v, dst_v)
-        _, nearest = cKDTree(src_v).query(q_src)
         nearest = np.broadcast_to(nearest[:, None], corners.shape)[~is_vertex]
         rel = src_tri[~is_vertex] - src_v[nearest]
         dst_tri[~is_vertex] = offset[nearest] + np.einsum("kij,kj->ki", affine[nearest], rel)
