@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,6 +26,22 @@ from .blocks import Block, points_in_blocks, resize_lanczos
 from .planes import relative_orientation
 
 logger = logging.getLogger("slime_match")
+
+
+@contextmanager
+def torch_threads(count: int):
+    """Run a block with ``count`` intra-op torch threads (restored afterwards).
+
+    Slime's block-pair and tile loops are thousands of tiny tensor ops: with several threads each op pays a
+    thread hand-off that costs far more than the op (measured: Blob matching of 450 x 450 descriptors
+    9 ms with 1 thread, 140 ms with 2 on a loaded 2-core machine).
+    """
+    previous = torch.get_num_threads()
+    torch.set_num_threads(count)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
 
 
 @dataclass

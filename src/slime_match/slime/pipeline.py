@@ -19,7 +19,7 @@ from ..geometry.homography import project
 from ..geometry.ransac import HomographyRansacConfig
 from ..pipelines import BasePipeline
 from ..timing import StageTimer
-from .block_matching import BlockPairMatches, build_levels, match_block_pairs
+from .block_matching import BlockPairMatches, build_levels, match_block_pairs, torch_threads
 from .blocks import Block, BlockConfig, make_blocks, make_tiles
 from .planes import MatchTable, PlaneConfig, deduplicate, expand_planes
 from .refine import FlowGuide, global_dtm, match_tiles
@@ -143,7 +143,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         levels0, levels1 = build_levels(pipeline, image0, blocks0), build_levels(pipeline, image1, blocks1)
         (tile_level0,), (tile_level1,) = build_levels(pipeline, image0, tiles0), build_levels(pipeline, image1,
                                                                                                tiles1)
-    with timer("block_pairs"):
+    with timer("block_pairs"), torch_threads(1):
         bpm, counts = match_block_pairs(pipeline, levels0, levels1, blocks0, blocks1, config.ransac,
                                         bins=config.bins, min_matches=config.min_plane_matches, seed=seed)
     raw_table, h, side = block_planes_to_original(bpm, blocks0, blocks1)
@@ -163,7 +163,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     tile_xy0 = tile_xy1 = np.zeros((0, 2))
     tile_scores = np.zeros(0)
     if config.refine_tiles and len(ftheta):
-        with timer("tile_refinement"):
+        with timer("tile_refinement"), torch_threads(1):
             guide = FlowGuide(guide_xy0, guide_xy1, config.planes.t_perp)
             tile_xy0, tile_xy1, tile_scores = match_tiles(
                 pipeline, tile_level0, tile_level1, np.stack([ftheta.tile0, ftheta.tile1], 1),
