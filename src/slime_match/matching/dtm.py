@@ -276,18 +276,23 @@ def _within_two(mesh: _Mesh, unit_vertex: np.ndarray, a: np.ndarray, b: np.ndarr
     n = len(mesh.tri.points)
     local = np.full(unit_vertex.max() + 1, -1, np.int64)
     local[mesh.vertex] = np.arange(len(mesh.vertex))
-    e = mesh.tri.half_edges
-    e = np.sort(e[:, 0] * n + e[:, 1])
-    src, dst = e // n, e % n
-    deg = np.bincount(src, minlength=n)
+    edge = np.sort(mesh.tri.half_edges[:, 0] * n + mesh.tri.half_edges[:, 1])  # CSR order by source
+    deg = np.bincount(edge // n, minlength=n)
     start = np.cumsum(deg) - deg
-    # two-hop paths i -> k -> j for every edge (i, k) and every edge (k, j)
-    hop = np.repeat(np.arange(len(e)), deg[dst])
-    offset = np.arange(len(hop)) - np.repeat(np.cumsum(deg[dst]) - deg[dst], deg[dst])
-    keys = np.sort(np.concatenate([e, src[hop] * n + dst[start[dst[hop]] + offset]]))
-    q = local[unit_vertex[a]] * n + local[unit_vertex[b]]
-    pos = np.minimum(np.searchsorted(keys, q), len(keys) - 1)
-    return keys[pos] == q
+    qa, qb = local[unit_vertex[a]], local[unit_vertex[b]]
+    # every path qa -> k -> qb: k runs over the neighbours of qa
+    path = np.repeat(np.arange(len(qa)), deg[qa])
+    group = np.cumsum(deg[qa]) - deg[qa]
+    middle = edge[np.arange(len(path)) - group[path] + start[qa][path]] % n
+    hop = np.zeros(len(qa), bool)
+    hop[path[_member(edge, middle * n + qb[path])]] = True
+    return hop | _member(edge, qa * n + qb)
+
+
+def _member(sorted_keys: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(Q,) whether each query key is in the sorted int64 keys."""
+    pos = np.minimum(np.searchsorted(sorted_keys, q), len(sorted_keys) - 1)
+    return sorted_keys[pos] == q
 
 
 def _greedy_survivors(a: np.ndarray, b: np.ndarray, alive: np.ndarray) -> np.ndarray:
