@@ -36,6 +36,7 @@ from __future__ import annotations
 import logging
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -124,35 +125,37 @@ def _delaunay(points: np.ndarray) -> np.ndarray:
 
 @dataclass
 class _Triangulation:
-    """A planar Delaunay triangulation with its topology (SciPy's ``Delaunay`` layout).
+    """A planar Delaunay triangulation whose hull is the border ring (SciPy's ``Delaunay`` layout).
 
     Attributes:
         points: (P, 2) float64 integer-valued vertex positions.
         simplices: (T, 3) int64 counter-clockwise vertex indices (see ``_delaunay``).
-        neighbors: (T, 3) triangle across the edge facing each corner, -1 on the hull.
-        half_edges: (3 T + B, 2) directed Delaunay edges, each neighbouring pair once in each direction.
+        half_edges: (3 T, 2) directed Delaunay edges: every pair of neighbours once in each direction,
+            except along the hull, where only border vertices lie.
     """
 
     points: np.ndarray
     simplices: np.ndarray
-    neighbors: np.ndarray
     half_edges: np.ndarray
 
     @classmethod
     def of(cls, points: np.ndarray) -> _Triangulation:
-        """Triangulate unique integer-valued (P, 2) points and link the triangles."""
+        """Triangulate unique integer-valued (P, 2) points."""
         simp = _delaunay(points)
-        # edge facing corner k is (k + 1, k + 2); its twin runs the other way in the neighbouring triangle
-        half = np.stack([simp[:, [1, 2, 0]], simp[:, [2, 0, 1]]], 2).reshape(-1, 2)
-        n = len(points)
+        # the edge facing corner k runs from corner k + 1 to corner k + 2
+        return cls(points, simp, np.stack([simp[:, [1, 2, 0]], simp[:, [2, 0, 1]]], 2).reshape(-1, 2))
+
+    @cached_property
+    def neighbors(self) -> np.ndarray:
+        """(T, 3) triangle across the edge facing each corner, -1 on the hull."""
+        half, n = self.half_edges, len(self.points)
+        # the twin of a half edge runs the other way in the neighbouring triangle
         undirected = np.minimum(half[:, 0], half[:, 1]) * n + np.maximum(half[:, 0], half[:, 1])
         order = np.argsort(undirected, kind="stable")
         twin = np.full(len(half), -1, np.int64)
         same = undirected[order][1:] == undirected[order][:-1]
         twin[order[1:][same]], twin[order[:-1][same]] = order[:-1][same], order[1:][same]
-        neighbors = np.where(twin >= 0, twin // 3, -1).reshape(-1, 3)
-        hull = half[twin < 0][:, ::-1]
-        return cls(points, simp, neighbors, np.concatenate([half, hull]))
+        return np.where(twin >= 0, twin // 3, -1).reshape(-1, 3)
 
 
 @dataclass
