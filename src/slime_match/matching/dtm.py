@@ -176,7 +176,7 @@ class _Mesh:
 def _border_ring(size: tuple[int, int], n_vertices: int, scale: float) -> np.ndarray:
     """(R, 2) integer points along the four image sides, 1 px outside the pixel grid."""
     h, w = size
-    step = max(int(round(scale * np.sqrt(w * h / max(n_vertices, 1)))), 1)
+    step = max(round(float(scale * np.sqrt(w * h / max(n_vertices, 1)))), 1)
     xs = np.append(np.arange(-1, w, step), w).astype(np.float64)
     ys = np.arange(step - 1, h, step, dtype=np.float64)
     x = np.concatenate([xs, xs, np.full_like(ys, -1.0), np.full_like(ys, float(w))])
@@ -341,10 +341,12 @@ def _local_affine(mesh: _Mesh, src: np.ndarray, dst: np.ndarray) -> tuple[np.nda
     v = np.concatenate([mesh.edges[:, 0], mesh.edges[:, 1], np.arange(n)])
     w = np.concatenate([mesh.edges[:, 1], mesh.edges[:, 0], np.arange(n)])
     f = np.column_stack([src[w] - src[v], np.ones(len(v))])  # (E, 3)
-    outer = (f[:, :, None] * f[:, None, :]).reshape(-1, 9)
-    cross = (f[:, :, None] * dst[w][:, None, :]).reshape(-1, 6)
-    mat = np.stack([np.bincount(v, outer[:, k], n) for k in range(9)], 1).reshape(n, 3, 3)
-    rhs = np.stack([np.bincount(v, cross[:, k], n) for k in range(6)], 1).reshape(n, 3, 2)
+    terms = np.concatenate([(f[:, :, None] * f[:, None, :]).reshape(-1, 9),
+                            (f[:, :, None] * dst[w][:, None, :]).reshape(-1, 6)], 1)  # (E, 15)
+    order = np.argsort(v, kind="stable")
+    count = np.bincount(v, minlength=n)  # >= 1: every vertex is in its own neighbourhood
+    sums = np.add.reduceat(terms[order], np.cumsum(count) - count)
+    mat, rhs = sums[:, :9].reshape(n, 3, 3), sums[:, 9:].reshape(n, 3, 2)
     ridge = 1.0  # px^2: negligible against real neighbourhoods, decisive for degenerate ones
     mat[:, [0, 1], [0, 1]] += ridge
     rhs[:, :2, :] += ridge * glob[:2][None]
