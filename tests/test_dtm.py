@@ -69,6 +69,23 @@ def test_without_unmatched_and_permutation_invariance():
     np.testing.assert_array_equal(res_p.removed_at, res.removed_at[perm])
 
 
+@pytest.mark.parametrize("seed", [0, 2])
+def test_small_block_low_inlier_ratio(seed):
+    """A Slime-sized block (256 x 256 px, 100 candidates, 40% inliers of an affine map, scores unrelated to
+    correctness, 500 unmatched keypoints): the best-scored outliers must not wipe out the inliers."""
+    g = np.random.default_rng(seed)
+    p0 = g.uniform(0, 256, (200, 2))
+    p1 = p0 @ np.array([[0.9, 0.15], [-0.1, 1.05]]).T + [10, -5]
+    p0, p1 = p0[((p1 >= 0) & (p1 < 256)).all(1)][:40], p1[((p1 >= 0) & (p1 < 256)).all(1)][:40]
+    xy0 = np.r_[p0, g.uniform(0, 256, (60, 2))]
+    xy1 = np.r_[p1 + g.normal(0, 0.7, p1.shape), g.uniform(0, 256, (60, 2))]
+    inlier = np.arange(100) < 40
+    res = dtm_filter(xy0, xy1, g.uniform(0, 1, 100), (256, 256), (256, 256), g.uniform(0, 256, (500, 2)),
+                     g.uniform(0, 256, (500, 2)))
+    check_result(res, 100)
+    assert res.keep[inlier].mean() >= 0.6 and res.keep[~inlier].mean() <= 0.1
+
+
 @pytest.mark.parametrize("k", [0, 1, 2, 3])
 def test_tiny_inputs(k):
     g = np.random.default_rng(k)
@@ -110,6 +127,8 @@ def test_config_validation():
         dtm_filter(np.zeros((1, 2)), np.zeros((1, 2)), [0.0], (10, 10), (10, 10), config={"nope": 1})
     with pytest.raises(ConfigError):
         DTMConfig(border_spacing=0)
+    with pytest.raises(ConfigError):
+        DTMConfig(settle_fraction=1.0)
     with pytest.raises(ValueError):
         dtm_filter(np.zeros((2, 2)), np.zeros((1, 2)), [0.0], (10, 10), (10, 10))
 
