@@ -482,8 +482,8 @@ class _Units:
         self._cache: tuple[bytes, tuple[_Mesh, _Mesh]] | None = None
 
     def meshes(self) -> tuple[_Mesh, _Mesh]:
-        """Both images' meshes of the alive units, in two threads for large inputs (OpenCV releases the GIL); the last
-        pair is reused while the alive set does not change."""
+        """Both images' meshes of the alive units, in two threads for large inputs (OpenCV releases the
+        GIL); the last pair is reused while the alive set does not change."""
         key = np.packbits(self.alive).tobytes()
         if self._cache is None or self._cache[0] != key:
             alive = self.alive.copy()
