@@ -163,7 +163,8 @@ def test_delaunay_and_locate_match_scipy():
     found = dtm_module._locate(tri, q, cKDTree(pts).query(q)[1])
     assert np.all(found >= 0)
     corners = pts[tri.simplices[found]]  # (P, 3, 2): q inside its triangle (barycentric test)
-    lam = np.stack([dtm_module._cross(corners[:, (k + 1) % 3] - q, corners[:, (k + 2) % 3] - q) for k in range(3)], 1)
+    lam = np.stack([dtm_module._cross(corners[:, (k + 1) % 3] - q, corners[:, (k + 2) % 3] - q)
+                    for k in range(3)], 1)
     assert np.all(lam >= -1e-9)
     # neighbours are symmetric and share an edge
     t, k = np.nonzero(tri.neighbors >= 0)

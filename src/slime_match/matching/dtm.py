@@ -24,7 +24,8 @@ candidates, ~6-20% correct, used to collapse to 2 matches):
   the spec's order (score, ties by count) never uses the count on continuous Blob scores, and the
   best-scored outliers, which are the majority there, removed the inliers around them.
 - *Settling.* Contraction stops at an iteration that would remove fewer than ``settle_fraction`` of the
-  alive units (and does not remove them): the long tail of iterations removing a few units each costs most of the time and expansion
+  alive units (and does not remove them): the long tail of iterations removing a few units each costs
+  most of the time and expansion
   restores the same final set.
 
 Everything is sparse: adjacency as sorted int64 pair keys, OpenCV's incremental Delaunay (``Subdiv2D``,
@@ -111,7 +112,8 @@ def _delaunay(points: np.ndarray) -> np.ndarray:
     span = points.max(0).astype(np.int64) - lo + 3
     # a far bounding box keeps Subdiv2D's virtual outer vertices from shadowing hull triangles
     far = 50 * int(span.max())
-    subdiv = cv2.Subdiv2D((int(lo[0]) - far, int(lo[1]) - far, int(span[0]) + 2 * far, int(span[1]) + 2 * far))
+    box = (int(lo[0]) - far, int(lo[1]) - far, int(span[0]) + 2 * far, int(span[1]) + 2 * far)
+    subdiv = cv2.Subdiv2D(box)
     subdiv.insert(points.astype(np.float32))
     corners = np.rint(subdiv.getTriangleList().reshape(-1, 2)).astype(np.int64) - lo
     index = np.empty(int(span[0] * span[1]), np.int64)  # position -> point lookup, only written cells read
@@ -408,7 +410,8 @@ def _vertices(xy: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.nda
     return np.stack([uniq % (w + 2), uniq // (w + 2)], 1).astype(np.float64), inverse.reshape(-1)
 
 
-def _prepare_unmatched(xy: np.ndarray | None, size: tuple[int, int], vertex_xy: np.ndarray) -> np.ndarray | None:
+def _prepare_unmatched(xy: np.ndarray | None, size: tuple[int, int],
+                       vertex_xy: np.ndarray) -> np.ndarray | None:
     """(U, 2) unique rounded unmatched keypoints off the candidates' vertices (V, 2), or None if none."""
     if xy is None or len(xy) == 0:
         return None
@@ -448,8 +451,10 @@ def dtm_filter(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0: tupl
     unit_of = unit_of.reshape(-1)
     uscore = np.full(len(unit_keys), np.inf)
     np.minimum.at(uscore, unit_of, scores)
-    unmatched = (_prepare_unmatched(unmatched0, sizes[0], vxy0), _prepare_unmatched(unmatched1, sizes[1], vxy1))
-    pool = ThreadPoolExecutor(2) if k + sum(len(u) for u in unmatched if u is not None) >= _PARALLEL_MIN else None
+    unmatched = (_prepare_unmatched(unmatched0, sizes[0], vxy0),
+                 _prepare_unmatched(unmatched1, sizes[1], vxy1))
+    n_points = k + sum(len(u) for u in unmatched if u is not None)
+    pool = ThreadPoolExecutor(2) if n_points >= _PARALLEL_MIN else None
     try:
         units = _Units((unit_keys // len(vxy1), unit_keys % len(vxy1)), uscore, (vxy0, vxy1), sizes,
                        unmatched, cfg, pool)
@@ -472,7 +477,8 @@ class _Units:
         rounded unmatched keypoints or None; alive: (U,) currently kept units.
     """
 
-    def __init__(self, uv: tuple[np.ndarray, np.ndarray], score: np.ndarray, vxy: tuple[np.ndarray, np.ndarray],
+    def __init__(self, uv: tuple[np.ndarray, np.ndarray], score: np.ndarray,
+                 vxy: tuple[np.ndarray, np.ndarray],
                  sizes: tuple[tuple[int, int], tuple[int, int]],
                  unmatched: tuple[np.ndarray | None, np.ndarray | None], cfg: DTMConfig,
                  pool: ThreadPoolExecutor | None) -> None:
@@ -488,8 +494,8 @@ class _Units:
         if self._cache is None or self._cache[0] != key:
             alive = self.alive.copy()
             def build(s: int) -> _Mesh:
-                return _triangulate(np.unique(self.uv[s][alive]), self.vxy[s], self.sizes[s], self.unmatched[s],
-                                    self.cfg)
+                return _triangulate(np.unique(self.uv[s][alive]), self.vxy[s], self.sizes[s],
+                                    self.unmatched[s], self.cfg)
             built = tuple(self.pool.map(build, (0, 1)) if self.pool is not None else map(build, (0, 1)))
             self._cache = (key, built)
         return self._cache[1]
