@@ -178,6 +178,10 @@ def build_parser() -> argparse.ArgumentParser:
     viz.add_argument("--stage", action="append", default=None, help="stage name(s) to draw (default: all)")
     viz.set_defaults(func=cmd_viz)
 
+    from .eval.bench import add_bench_parser
+
+    add_bench_parser(sub)
+
     return parser
 
 
