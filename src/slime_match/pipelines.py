@@ -84,6 +84,11 @@ class BasePipeline:
     def detect(self, context: Any) -> Features:
         raise NotImplementedError
 
+    def detect_regions(self, context: Any) -> Features:
+        """Keypoints with their shape frames only (no orientation, (N, 0) descriptors): for regions that
+        will only ever be described under fixed orientations (Slime's tiles)."""
+        raise NotImplementedError
+
     def describe_fixed(self, context: Any, features: Features, angle: float) -> Features:
         raise NotImplementedError
 
@@ -135,6 +140,12 @@ class HzPlusPipeline(BasePipeline):
     def detect(self, context: HzContext) -> Features:
         keypoints = detect_harrisz(context.image, self.harrisz)
         return self.extractor.extract(context.image, keypoints, pyramid=context.pyramid)
+
+    def detect_regions(self, context: HzContext) -> Features:
+        keypoints = detect_harrisz(context.image, self.harrisz)
+        shape_laf = self.extractor.shape_frames(context.pyramid, keypoints)
+        descriptors = torch.zeros(len(keypoints), 0, device=shape_laf.device)
+        return Features(shape_laf, descriptors, keypoints.response.to(shape_laf.device), shape_laf)
 
     def describe_fixed(self, context: HzContext, features: Features, angle: float) -> Features:
         return self.extractor.describe_fixed(context.pyramid, features.shape_laf, angle)
@@ -191,6 +202,20 @@ class RootSiftPipeline(BasePipeline):
         if self.config.upright:
             keypoints = _upright_unique(keypoints)
         return self._describe(context, keypoints)
+
+    def detect_regions(self, context: SiftContext) -> Features:
+        keypoints = _upright_unique(self.sift.detect(context.grey, None))
+        if not keypoints:
+            return _empty_features(0, self.device)
+        xy = np.array([k.pt for k in keypoints], np.float32)
+        scale = np.array([k.size / 2.0 for k in keypoints], np.float32)
+        laf = np.zeros((len(xy), 2, 3), np.float32)
+        laf[:, 0, 0] = laf[:, 1, 1] = scale
+        laf[:, :, 2] = xy
+        as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a)).to(self.device)  # noqa: E731
+        response = np.array([k.response for k in keypoints], np.float32)
+        return Features(as_tensor(laf), torch.zeros(len(xy), 0, device=self.device), as_tensor(response),
+                        as_tensor(laf))
 
     def describe_fixed(self, context: SiftContext, features: Features, angle: float) -> Features:
         laf = features.laf.detach().cpu().numpy()

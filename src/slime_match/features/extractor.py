@@ -110,13 +110,17 @@ class LocalFeatureExtractor:
             (upright affine-normalised frames, for :meth:`describe_fixed`).
         """
         pyr = pyramid if pyramid is not None else self.pyramid(image)
-        xy = keypoints.xy.to(self.device, torch.float32)
-        laf = ellipse_to_laf(xy, keypoints.ellipse.to(self.device, torch.float32))
-        shape_laf = self.shape(pyr, laf) if self.shape is not None else set_laf_angle(laf, 0.0)
+        shape_laf = self.shape_frames(pyr, keypoints)
         oriented = self.orienter(pyr, shape_laf)
         desc = self.descriptor(pyr, oriented)
         response = keypoints.response.to(self.device, torch.float32)
         return Features(laf=oriented, descriptors=desc, response=response, shape_laf=shape_laf)
+
+    def shape_frames(self, pyramid: PatchPyramid, keypoints: Keypoints) -> torch.Tensor:
+        """(N, 2, 3) upright affine-normalised frames of keypoints (ellipse -> LAF -> shape estimator)."""
+        xy = keypoints.xy.to(self.device, torch.float32)
+        laf = ellipse_to_laf(xy, keypoints.ellipse.to(self.device, torch.float32))
+        return self.shape(pyramid, laf) if self.shape is not None else set_laf_angle(laf, 0.0)
 
     def describe_fixed(
         self, pyramid: PatchPyramid, shape_laf: torch.Tensor, angle: float, response: torch.Tensor | None = None

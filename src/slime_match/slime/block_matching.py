@@ -67,13 +67,16 @@ class ScaleLevel:
     fixed: dict[int, tuple[np.ndarray, torch.Tensor | None]] = field(default_factory=dict)
 
 
-def build_levels(pipeline: BasePipeline, image: np.ndarray, blocks: list[Block]) -> list[ScaleLevel]:
+def build_levels(pipeline: BasePipeline, image: np.ndarray, blocks: list[Block],
+                 regions_only: bool = False) -> list[ScaleLevel]:
     """Detect and describe each block scale once on the whole (Lanczos-)scaled image.
 
     Args:
         pipeline: the base pipeline.
         image: (H, W, 3) float image.
         blocks: the image's blocks (``make_blocks``).
+        regions_only: keep only the shape frames (no own orientation or descriptors): enough for regions
+            that are only described under fixed orientations (the tiles, Sec. 3.8).
 
     Returns:
         One ScaleLevel per distinct block scale, in increasing scale index.
@@ -84,7 +87,7 @@ def build_levels(pipeline: BasePipeline, image: np.ndarray, blocks: list[Block])
         factor = blocks[members_blocks[0]].factor
         scaled = resize_lanczos(image, factor)
         context = pipeline.prepare(scaled)
-        features = pipeline.detect(context)
+        features = pipeline.detect_regions(context) if regions_only else pipeline.detect(context)
         original = blocks[members_blocks[0]].to_original(features.xy.detach().cpu().numpy())
         inside = points_in_blocks(original, [blocks[i] for i in members_blocks])
         members = [inside.indices[inside.indptr[k]:inside.indptr[k + 1]] for k in range(len(members_blocks))]

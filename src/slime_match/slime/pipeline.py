@@ -141,8 +141,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     tiles0, tiles1 = make_tiles(h0, w0, config.blocks), make_tiles(h1, w1, config.blocks)
     with timer("features"):
         levels0, levels1 = build_levels(pipeline, image0, blocks0), build_levels(pipeline, image1, blocks1)
-        (tile_level0,), (tile_level1,) = build_levels(pipeline, image0, tiles0), build_levels(pipeline, image1,
-                                                                                               tiles1)
+        (tile_level0,) = build_levels(pipeline, image0, tiles0, regions_only=True)
+        (tile_level1,) = build_levels(pipeline, image1, tiles1, regions_only=True)
     with timer("block_pairs"), torch_threads(1):
         bpm, counts = match_block_pairs(pipeline, levels0, levels1, blocks0, blocks1, config.ransac,
                                         bins=config.bins, min_matches=config.min_plane_matches, seed=seed)
