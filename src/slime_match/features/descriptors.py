@@ -1,4 +1,9 @@
-"""Patch descriptors: HardNet, TFeat (learned, kornia weights) and RootSIFT (weight-free), all L2-normalised."""
+"""Patch descriptors: HardNet, TFeat (learned, kornia weights) and RootSIFT (weight-free), all L2-normalised.
+
+The networks run as inference copies (:func:`~slime_match.features.inference.fuse_for_inference`); RootSIFT
+is the vectorised :class:`~slime_match.features.gradients.SIFTPatchDescriptor` (kornia's ``SIFTDescriptor``
+semantics and layout, about 2x faster).
+"""
 
 from __future__ import annotations
 
@@ -7,9 +12,10 @@ from pathlib import Path
 
 import torch
 import torch.nn.functional as F
-from kornia.feature import SIFTDescriptor
 
 from slime_match.errors import ConfigError, WeightsNotFoundError
+from slime_match.features.gradients import SIFTPatchDescriptor
+from slime_match.features.inference import fuse_for_inference
 from slime_match.features.laf import PatchPyramid
 from slime_match.features.weights import is_cached, load_model, load_state_dict
 
@@ -75,10 +81,11 @@ class Descriptor:
             raise ConfigError(f"unknown descriptor {method!r}; choose one of {', '.join(DESCRIPTOR_METHODS)}")
         self.method = method
         self.config = config or DescriptorConfig()
+        self.net: SIFTPatchDescriptor | torch.nn.Module
         if method == "rootsift":
-            self.net = SIFTDescriptor(self.config.patch_size, rootsift=True).to(device)
+            self.net = SIFTPatchDescriptor(self.config.patch_size, rootsift=True, device=device)
         else:
-            self.net = load_model(method, weights_dir, device)
+            self.net = fuse_for_inference(load_model(method, weights_dir, device))
 
     @property
     def dim(self) -> int:

@@ -1,7 +1,8 @@
 """Orientation of upright affine frames: OriNet (learned), dominant gradient (SIFT-like), upright, fixed.
 
 Angles follow :mod:`slime_match.features.laf`: radians in pixel coordinates (x right, y down). OriNet and
-the gradient histogram (kornia's ``PatchDominantGradientOrientation``) measure their angle in the patch of
+the gradient histogram (:class:`~slime_match.features.gradients.DominantGradientOrientation`, kornia's
+``PatchDominantGradientOrientation`` semantics) measure their angle in the patch of
 the upright frame, counter-clockwise on screen (kornia's convention); the frame is rotated inside the
 patch by the opposite angle, so that its patch x axis follows the estimated direction.
 """
@@ -12,9 +13,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import torch
-from kornia.feature import PatchDominantGradientOrientation
 
 from slime_match.errors import ConfigError
+from slime_match.features.gradients import DominantGradientOrientation
+from slime_match.features.inference import fuse_for_inference
 from slime_match.features.laf import PatchPyramid, rotate_laf, set_laf_angle, upright_laf
 from slime_match.features.weights import load_model
 
@@ -63,11 +65,11 @@ class Orienter:
             )
         self.method = method
         self.config = config or OrientationConfig()
-        self.net: torch.nn.Module | None = None
+        self.net: torch.nn.Module | DominantGradientOrientation | None = None
         if method == "orinet":
-            self.net = load_model("orinet", weights_dir, device)
+            self.net = fuse_for_inference(load_model("orinet", weights_dir, device))
         elif method == "gradient":
-            self.net = PatchDominantGradientOrientation(self.config.patch_size, self.config.num_angular_bins).to(device)
+            self.net = DominantGradientOrientation(self.config.patch_size, self.config.num_angular_bins, device)
 
     @torch.inference_mode()
     def patch_angles(self, patches: torch.Tensor) -> torch.Tensor:

@@ -11,9 +11,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import torch
-from kornia.filters import spatial_gradient
 
 from slime_match.errors import ConfigError
+from slime_match.features.gradients import patch_gradients
+from slime_match.features.inference import fuse_for_inference
 from slime_match.features.laf import PatchPyramid, laf_scale, upright_laf
 from slime_match.features.weights import load_model
 
@@ -71,27 +72,25 @@ def second_moment_shape(patches: torch.Tensor, window_sigma: float) -> torch.Ten
         (N, 2, 2) shapes ``M^{-1/2}`` with det 1 (identity for flat patches).
     """
     n, _, p, _ = patches.shape
-    g = spatial_gradient(patches, mode="sobel", order=1)  # (N, 1, 2, P, P)
-    gx, gy = g[:, 0, 0], g[:, 0, 1]
+    gx, gy = patch_gradients(patches, "sobel")  # (N, P, P) each
     t = torch.arange(p, dtype=patches.dtype, device=patches.device) - (p - 1) / 2
     w1 = torch.exp(-0.5 * (t / window_sigma) ** 2)
-    w = w1[:, None] * w1[None, :]
-    m = torch.stack(
-        [
-            torch.stack([(w * gx * gx).sum((1, 2)), (w * gx * gy).sum((1, 2))], -1),
-            torch.stack([(w * gx * gy).sum((1, 2)), (w * gy * gy).sum((1, 2))], -1),
-        ],
-        -2,
-    ).double()
-    det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] ** 2
-    tr = m[:, 0, 0] + m[:, 1, 1]
+    w = (w1[:, None] * w1[None, :]).reshape(p * p)
+    gx, gy = gx.reshape(n, p * p), gy.reshape(n, p * p)
+    wgx = gx * w
+    xx, xy, yy = (wgx * gx).sum(1), (wgx * gy).sum(1), (gy * gy * w).sum(1)
+    a, b, c = xx.double(), xy.double(), yy.double()  # M = [[a, b], [b, c]]
+    det = a * c - b * b
+    tr = a + c
     flat = ~(det > 1e-12 * tr.square()) | ~(tr > 1e-12)
-    m = torch.where(flat[:, None, None], torch.eye(2, dtype=m.dtype, device=m.device).expand(n, 2, 2), m)
-    # For 2x2 SPD M, M + sqrt(det M) I is proportional to M^{1/2}; invert it and normalise to det 1.
-    s = (m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] ** 2).sqrt()
-    root = m + s[:, None, None] * torch.eye(2, dtype=m.dtype, device=m.device)
-    inv = torch.linalg.inv(root)
-    inv = inv / torch.linalg.det(inv).sqrt()[:, None, None]
+    one, zero = torch.ones_like(a), torch.zeros_like(a)
+    a, b, c = torch.where(flat, one, a), torch.where(flat, zero, b), torch.where(flat, one, c)
+    # For 2x2 SPD M, R = M + sqrt(det M) I is proportional to M^{1/2}; R^{-1} normalised to det 1 is
+    # adj(R) / sqrt(det R) (closed form, no batched LAPACK call).
+    s = (a * c - b * b).sqrt()
+    r00, r11 = a + s, c + s
+    norm = (r00 * r11 - b * b).rsqrt()
+    inv = torch.stack([torch.stack([r11, -b], -1), torch.stack([-b, r00], -1)], -2) * norm[:, None, None]
     return inv.to(patches.dtype)
 
 
@@ -116,7 +115,7 @@ class ShapeEstimator:
             raise ConfigError(f"unknown shape method {method!r}; choose one of {', '.join(SHAPE_METHODS)}")
         self.method = method
         self.config = config or ShapeConfig()
-        self.net = load_model("affnet", weights_dir, device) if method == "affnet" else None
+        self.net = fuse_for_inference(load_model("affnet", weights_dir, device)) if method == "affnet" else None
 
     def _affnet_shape(self, patches: torch.Tensor) -> torch.Tensor:
         """(N, 2, 2) AffNet shapes ``[[1 + a, 0], [b, 1 + c]]`` of patches (N, 1, 32, 32)."""
