@@ -114,7 +114,11 @@ def _delaunay(points: np.ndarray) -> np.ndarray:
     far = 50 * int(span.max())
     box = (int(lo[0]) - far, int(lo[1]) - far, int(span[0]) + 2 * far, int(span[1]) + 2 * far)
     subdiv = cv2.Subdiv2D(box)
-    subdiv.insert(points.astype(np.float32))
+    # insertion along a snake of horizontal strips keeps Subdiv2D's point location walks short
+    strip = max(int(4 * np.sqrt(span[0] * span[1] / len(points))), 1)
+    row = (points[:, 1].astype(np.int64) - lo[1]) // strip
+    subdiv.insert(points[np.lexsort((np.where(row % 2 == 0, points[:, 0], -points[:, 0]), row))]
+                  .astype(np.float32))
     corners = np.rint(subdiv.getTriangleList().reshape(-1, 2)).astype(np.int64) - lo
     index = np.empty(int(span[0] * span[1]), np.int64)  # position -> point lookup, only written cells read
     index[(points.astype(np.int64) - lo) @ np.array([1, span[0]])] = np.arange(len(points))
