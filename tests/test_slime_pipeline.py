@@ -1,0 +1,123 @@
+"""Slime orchestration: coordinate frames, flow guide, final merge, and end-to-end runs with exact GT."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from conftest import DATA, require
+from slime_match.config import make_config
+from slime_match.eval.datasets import rotate_image
+from slime_match.eval.metrics import correct_matches_homography
+from slime_match.geometry.homography import project
+from slime_match.io import load_image
+from slime_match.matcher import Matcher
+from slime_match.slime.block_matching import BlockPairMatches, orientation_bin, torch_threads
+from slime_match.slime.blocks import make_blocks
+from slime_match.slime.pipeline import block_planes_to_original
+from slime_match.slime.refine import FlowGuide, global_dtm
+
+WEIGHT_FREE = dict(shape="baumberg", orientation="gradient", descriptor="rootsift")
+
+
+def test_orientation_bin_centres_and_wrap():
+    width = 2 * math.pi / 16
+    assert orientation_bin(0.0, 16) == 0
+    assert orientation_bin(0.49 * width, 16) == 0 and orientation_bin(0.51 * width, 16) == 1
+    assert orientation_bin(-width, 16) == 15 and orientation_bin(2 * math.pi, 16) == 0
+    assert orientation_bin(math.pi, 16) == 8
+
+
+def test_block_planes_map_exactly_to_original_frame():
+    blocks0, blocks1 = make_blocks(480, 640), make_blocks(600, 800)
+    w0 = next(i for i, b in enumerate(blocks0) if b.scale_index == 2)
+    w1 = next(i for i, b in enumerate(blocks1) if b.scale_index == 0)
+    h_true = np.array([[0.9, 0.1, 20.0], [-0.05, 1.1, -10.0], [1e-4, 2e-5, 1.0]])
+    rng = np.random.default_rng(0)
+    x_orig = rng.uniform(50, 400, (30, 2))
+    y_orig, _ = project(h_true, x_orig)
+    b0, b1 = blocks0[w0], blocks1[w1]
+    x_s, y_s = b0.to_scaled(x_orig), b1.to_scaled(y_orig)
+    # The block-frame homography that RANSAC would estimate: scaled 0 -> scaled 1.
+    from slime_match.geometry.homography import homography_dlt
+
+    h_scaled, _ = homography_dlt(x_s, y_s)
+    bpm = BlockPairMatches(np.array([[w0, w1]]), h_scaled[None], np.array([0.3]), np.zeros(30, np.int64), x_s, y_s,
+                           np.full(30, 2.0 * b0.factor), np.full(30, 3.0 * b1.factor), np.arange(30.0))
+    table, h, side = block_planes_to_original(bpm, blocks0, blocks1)
+    assert np.allclose(table.xy0, x_orig, atol=1e-6) and np.allclose(table.xy1, y_orig, atol=1e-6)
+    mapped, _ = project(h[0], x_orig)
+    assert np.allclose(mapped, y_orig, atol=1e-5)
+    assert side.tolist() == [1.0]
+    assert np.allclose(table.angle1, 0.3) and np.allclose(table.angle0, 0.0)
+    assert np.allclose(table.scale0, 2.0, rtol=1e-2) and np.allclose(table.scale1, 3.0, rtol=1e-2)
+
+
+def test_flow_guide_equals_brute_force():
+    rng = np.random.default_rng(1)
+    g0, g1 = rng.uniform(0, 300, (200, 2)), rng.uniform(0, 300, (200, 2))
+    pick = rng.integers(0, 200, 500)
+    y0 = g0[pick] + rng.normal(0, 8, (500, 2))
+    y1 = g1[pick] + rng.normal(0, 8, (500, 2))
+    y1[:250] = rng.uniform(0, 300, (250, 2))
+    guide = FlowGuide(g0, g1, 15.0)
+    d0 = np.linalg.norm(y0[:, None] - g0[None], axis=2)
+    d1 = np.linalg.norm(y1[:, None] - g1[None], axis=2)
+    expected = (np.maximum(d0, d1) < 15.0).any(axis=1)
+    assert expected.sum() > 50
+    assert np.array_equal(guide(y0, y1, neighbours=200), expected)
+    assert FlowGuide(np.zeros((0, 2)), np.zeros((0, 2)), 15.0)(y0, y1).sum() == 0
+
+
+def test_global_dtm_merges_exact_duplicates():
+    rng = np.random.default_rng(2)
+    x0 = rng.uniform(0, 200, (300, 2))
+    x1 = x0 + [10.0, 5.0]
+    xy0, xy1 = np.vstack([x0, x0[:100]]), np.vstack([x1, x1[:100]])
+    scores = rng.uniform(0, 1, 400)
+    k0, k1, s = global_dtm(xy0, xy1, scores, (220, 220), (220, 220), x0, x1)
+    rows = np.hstack([k0, k1])
+    assert len(np.unique(rows, axis=0)) == len(rows) and len(rows) > 250
+    assert np.all(np.diff(s) >= 0)
+
+
+def test_torch_threads_restores_setting():
+    before = torch.get_num_threads()
+    with torch_threads(1):
+        assert torch.get_num_threads() == 1
+    assert torch.get_num_threads() == before
+
+
+@pytest.fixture(scope="module")
+def graf_small():
+    """graf 1 -> 3 at half resolution with its exact GT homography."""
+    import cv2
+
+    folder = require(DATA / "oxford_graf")
+    a, b = load_image(folder / "img1.png"), load_image(folder / "img3.png")
+    h = np.loadtxt(folder / "H1to3p")
+    s = np.diag([0.5, 0.5, 1.0])
+    s[:2, 2] = -0.25  # pixel-centre convention of a 2x downscale
+    small = [cv2.resize(im, (im.shape[1] // 2, im.shape[0] // 2), interpolation=cv2.INTER_AREA) for im in (a, b)]
+    return small[0], small[1], s @ h @ np.linalg.inv(s)
+
+
+def test_slime_weight_free_beats_its_base_on_a_real_pair(graf_small):
+    a, b, h = graf_small
+    slime = Matcher(make_config("slime", **WEIGHT_FREE))(a, b)
+    base = Matcher(make_config("hz+", **WEIGHT_FREE))(a, b)
+    ok_slime = correct_matches_homography(slime.keypoints0, slime.keypoints1, h)
+    ok_base = correct_matches_homography(base.keypoints0, base.keypoints1, h)
+    assert ok_slime.mean() >= 0.9, ok_slime.mean()
+    assert ok_slime.sum() > ok_base.sum()
+    counts = slime.summary["counts"]
+    assert counts["block_planes"] > 0 and counts["ftheta_sets"] > 0 and counts["final"] == len(slime)
+
+
+def test_slime_on_a_rotated_pair(graf_small):
+    a, b, h = graf_small
+    b_rot, rot = rotate_image(b, 90)
+    result = Matcher(make_config("slime", **WEIGHT_FREE))(a, b_rot)
+    ok = correct_matches_homography(result.keypoints0, result.keypoints1, rot @ h)
+    assert ok.sum() > 100 and ok.mean() >= 0.8, (int(ok.sum()), ok.mean())
