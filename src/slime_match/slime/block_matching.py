@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import logging
 import math
+import multiprocessing
+from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
@@ -168,18 +170,45 @@ def shift_features(features: Features, box: tuple[float, float, float, float]) -
     return Features(laf, features.descriptors, features.response, features.shape_laf)
 
 
-def _match_pairs(pipeline, pairs, get0, get1, blocks0, blocks1):
-    """Run the base pipeline on block pairs; returns per pair (f0, f1, Matches)."""
-    out = []
-    for w0, w1 in pairs:
-        f0, f1 = get0(w0), get1(w1)
-        b0, b1 = blocks0[w0], blocks1[w1]
-        size0, size1 = b0.shape, b1.shape
-        if len(f0) < 4 or len(f1) < 4:
-            out.append((f0, f1, Matches.empty()))
-            continue
-        out.append((f0, f1, pipeline.match(shift_features(f0, b0.box), shift_features(f1, b1.box), size0, size1)))
-    return out
+PairFeatures = Callable[[tuple[int, int]], Features]
+
+_FORK_TASK: tuple | None = None  # set just before forking workers, read by _match_chunk in the children
+
+
+def _match_one(pipeline: BasePipeline, pair: tuple[int, int], get0: PairFeatures, get1: PairFeatures,
+               blocks0: list[Block], blocks1: list[Block]) -> Matches:
+    """The base pipeline on one block pair (features shifted into each block's own frame)."""
+    f0, f1 = get0(pair), get1(pair)
+    if len(f0) < 4 or len(f1) < 4:
+        return Matches.empty()
+    b0, b1 = blocks0[pair[0]], blocks1[pair[1]]
+    return pipeline.match(shift_features(f0, b0.box), shift_features(f1, b1.box), b0.shape, b1.shape)
+
+
+def _match_chunk(bounds: tuple[int, int]) -> list[Matches]:
+    torch.set_num_threads(1)
+    pipeline, pairs, get0, get1, blocks0, blocks1 = _FORK_TASK
+    return [_match_one(pipeline, pairs[k], get0, get1, blocks0, blocks1) for k in range(*bounds)]
+
+
+def match_pairs(pipeline: BasePipeline, pairs: list[tuple[int, int]], get0: PairFeatures, get1: PairFeatures,
+                blocks0: list[Block], blocks1: list[Block], workers: int = 1) -> list[Matches]:
+    """The base pipeline on many block pairs, in ``workers`` forked processes when > 1.
+
+    The children inherit the features by fork (nothing is pickled but the returned matches); each runs
+    single-threaded torch, so the pairs are spread over the CPU cores.
+    """
+    global _FORK_TASK
+    if workers <= 1 or len(pairs) < 4 * workers or "fork" not in multiprocessing.get_all_start_methods():
+        return [_match_one(pipeline, pair, get0, get1, blocks0, blocks1) for pair in pairs]
+    edges = np.linspace(0, len(pairs), 8 * workers + 1).astype(int)
+    _FORK_TASK = (pipeline, pairs, get0, get1, blocks0, blocks1)
+    try:
+        with multiprocessing.get_context("fork").Pool(workers) as pool:
+            chunks = pool.map(_match_chunk, list(zip(edges[:-1], edges[1:])))
+    finally:
+        _FORK_TASK = None
+    return [m for chunk in chunks for m in chunk]
 
 
 def match_block_pairs(
@@ -192,6 +221,7 @@ def match_block_pairs(
     bins: int = 16,
     min_matches: int = 8,
     seed: int = 0,
+    workers: int = 1,
 ) -> tuple[BlockPairMatches, dict[str, int]]:
     """Secs. 3.2 + 3.3 for every block pair: base pipeline + homography RANSAC, then the re-run with
     fixed orientations (theta = 0 in image 0, theta* in image 1) + RANSAC -> M_l and H_l.
@@ -203,20 +233,22 @@ def match_block_pairs(
     where1 = {w: (lv, i) for lv in levels1 for i, w in enumerate(lv.blocks)}
     pairs = [(w0, w1) for w0 in range(len(blocks0)) for w1 in range(len(blocks1))]
 
-    def own(where):
-        def get(w):
-            level, i = where[w]
+    def own(where, side):
+        def get(pair):
+            level, i = where[pair[side]]
             return level.features.subset(torch.from_numpy(level.members[i]))
         return get
 
     # 3.2: the base pipeline with its own orientations, then RANSAC.
-    first = _match_pairs(pipeline, pairs, own(where0), own(where1), blocks0, blocks1)
-    problems = [_positions(f0, f1, m) for f0, f1, m in first]
-    results = ransac_homography_many(problems, ransac, seed=seed)
+    own0, own1 = own(where0, 0), own(where1, 1)
+    first = match_pairs(pipeline, pairs, own0, own1, blocks0, blocks1, workers)
+    results = ransac_homography_many([_positions(own0(p), own1(p), m) for p, m in zip(pairs, first)], ransac,
+                                     seed=seed)
     thetas = {}
-    for pair, (f0, f1, m), res in zip(pairs, first, results):
+    for pair, m, res in zip(pairs, first, results):
         if res.model is None or res.inliers.sum() < min_matches:
             continue
+        f0, f1 = own0(pair), own1(pair)
         m_in = m.subset(res.inliers)
         rho = (f1.angle[torch.from_numpy(m_in.idx1)] - f0.angle[torch.from_numpy(m_in.idx0)]).cpu().numpy()
         thetas[pair] = relative_orientation(np.zeros_like(rho), rho, bins=bins)
@@ -237,21 +269,23 @@ def match_block_pairs(
             wanted = {b: np.concatenate(parts) for b, parts in requests.get(id(level), {}).items()}
             describe_fixed_bins(pipeline, level, wanted, bins)
 
-    def fixed0(w):
-        level, i = where0[w]
+    def fixed0(pair):
+        level, i = where0[pair[0]]
         return fixed_features(level, level.members[i], 0, bins)
 
-    second = []
-    for pair in refined_pairs:
-        level1, i1 = where1[pair[1]]
-        f1 = fixed_features(level1, level1.members[i1], bin_of[pair], bins)
-        second.extend(_match_pairs(pipeline, [pair], fixed0, lambda _w, f1=f1: f1, blocks0, blocks1))
-    results = ransac_homography_many([_positions(f0, f1, m) for f0, f1, m in second], ransac, seed=seed + 1)
+    def fixed1(pair):
+        level, i = where1[pair[1]]
+        return fixed_features(level, level.members[i], bin_of[pair], bins)
+
+    second = match_pairs(pipeline, refined_pairs, fixed0, fixed1, blocks0, blocks1, workers)
+    results = ransac_homography_many([_positions(fixed0(p), fixed1(p), m) for p, m in zip(refined_pairs, second)],
+                                     ransac, seed=seed + 1)
 
     keep_pairs, hs, theta_out, parts = [], [], [], []
-    for pair, (f0, f1, m), res in zip(refined_pairs, second, results):
+    for pair, m, res in zip(refined_pairs, second, results):
         if res.model is None or res.inliers.sum() < min_matches:
             continue
+        f0, f1 = fixed0(pair), fixed1(pair)
         m_in = m.subset(res.inliers)
         keep_pairs.append(pair)
         hs.append(res.model)

@@ -11,6 +11,7 @@ Stages and where they live:
 from __future__ import annotations
 
 import logging
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -50,6 +51,7 @@ class SlimeConfig:
         bins: orientation histogram bins of the block-pair refinement (16).
         min_plane_matches: a block pair yields a plane only with at least this many RANSAC inliers
             (ours: the paper does not state a minimum; 4 would be any minimal sample).
+        workers: processes for the block-pair matching (None = one per CPU core on CPU, 1 on CUDA).
         refine_tiles: run Sec. 3.8 (tile re-matching + global DTM); False stops at F^theta.
         keep_stages: keep every stage's sets in the result (for ``slime viz`` / ``--save-stages``).
     """
@@ -60,6 +62,7 @@ class SlimeConfig:
     tiles: TileConfig = field(default_factory=TileConfig)
     bins: int = 16
     min_plane_matches: int = 8
+    workers: int | None = None
     refine_tiles: bool = True
     keep_stages: bool = False
 
@@ -110,6 +113,14 @@ def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks
     return table, h, side
 
 
+def _workers(requested: int | None, pipeline: BasePipeline) -> int:
+    """Worker processes for the block pairs: CUDA work stays in one process (CUDA does not survive fork)."""
+    if requested is not None:
+        return max(1, requested)
+    device = getattr(pipeline, "device", None)
+    return 1 if device is not None and device.type == "cuda" else max(1, os.cpu_count() or 1)
+
+
 def select_planes(table: MatchTable, expanded, tiles0: list[Block], tiles1: list[Block], config: TileConfig
                   ) -> dict[str, TileSets | np.ndarray | float]:
     """Secs. 3.5-3.7: tile sets -> H* -> H -> M+ -> F-bar -> fused F^{l*} -> F^theta."""
@@ -145,7 +156,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         (tile_level1,) = build_levels(pipeline, image1, tiles1, regions_only=True)
     with timer("block_pairs"), torch_threads(1):
         bpm, counts = match_block_pairs(pipeline, levels0, levels1, blocks0, blocks1, config.ransac,
-                                        bins=config.bins, min_matches=config.min_plane_matches, seed=seed)
+                                        bins=config.bins, min_matches=config.min_plane_matches, seed=seed,
+                                        workers=_workers(config.workers, pipeline))
     raw_table, h, side = block_planes_to_original(bpm, blocks0, blocks1)
     table, _ = deduplicate(raw_table)
     counts.update(block_matches=len(raw_table), block_matches_unique=len(table))
