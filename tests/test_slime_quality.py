@@ -1,0 +1,60 @@
+"""Slime vs its base Hz+ on the planar GT pairs and on exact rotations (the issue's quality bars).
+
+These run Slime on 15 + 8 real pairs (tens of seconds each on a 2-core CPU): marked slow, run them with
+``python -m pytest -m slow tests/test_slime_quality.py``.
+"""
+
+import numpy as np
+import pytest
+
+from conftest import DATA, require
+from slime_match.config import make_config
+from slime_match.eval.datasets import rotate_image
+from slime_match.eval.metrics import correct_matches_homography, coverage, valid_area_homography
+from slime_match.io import load_image
+from slime_match.matcher import Matcher
+
+PLANAR = [("oxford_graf", "img1.png", f"img{k}.png", f"H1to{k}p") for k in range(2, 7)] + [
+    (f"hpatches/{seq}", "1.ppm", f"{k}.ppm", f"H_1_{k}") for seq in ("v_wormhole", "v_churchill") for k in range(2, 7)
+]
+
+
+def _evaluate(matcher, folder, name0, name1, h_name, angle=0):
+    base = require(DATA / folder)
+    image0, image1 = load_image(base / name0), load_image(base / name1)
+    h = np.loadtxt(base / h_name)
+    if angle:
+        image1, rotation = rotate_image(image1, angle)
+        h = rotation @ h
+    result = matcher(image0, image1)
+    ok = correct_matches_homography(result.keypoints0, result.keypoints1, h)
+    valid0, valid1 = valid_area_homography(h, image0.shape[:2], image1.shape[:2])
+    cov = coverage(result.keypoints0[ok], result.keypoints1[ok], image0.shape[:2], image1.shape[:2], valid0, valid1)
+    return {"matches": len(ok), "correct": int(ok.sum()), "precision": float(ok.mean()) if len(ok) else 0.0,
+            "coverage": cov}
+
+
+@pytest.mark.slow
+def test_slime_coverage_beats_base_on_planar_pairs():
+    slime = Matcher(make_config("slime", descriptor="tfeat"))
+    base = Matcher(make_config("hz+", descriptor="tfeat"))
+    rows = [(_evaluate(slime, *p), _evaluate(base, *p)) for p in PLANAR]
+    cov_s = np.mean([s["coverage"] for s, _ in rows])
+    cov_b = np.mean([b["coverage"] for _, b in rows])
+    prec_s = np.mean([s["precision"] for s, _ in rows])
+    prec_b = np.mean([b["precision"] for _, b in rows])
+    fail_s = sum(s["correct"] == 0 for s, _ in rows)
+    fail_b = sum(b["correct"] == 0 for _, b in rows)
+    print(f"coverage {cov_s:.4f} vs {cov_b:.4f}, precision {prec_s:.4f} vs {prec_b:.4f}, failures {fail_s} vs {fail_b}")
+    assert cov_s >= 1.2 * cov_b
+    assert prec_s >= prec_b - 0.02
+    assert fail_s < fail_b or fail_b == 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("angle", [45, 90, 180, 270])
+@pytest.mark.parametrize("pair", [("oxford_graf", "img1.png", "img3.png", "H1to3p"),
+                                  ("hpatches/v_wormhole", "1.ppm", "3.ppm", "H_1_3")])
+def test_slime_finds_rotated_pairs(pair, angle):
+    row = _evaluate(Matcher(make_config("slime", descriptor="tfeat")), *pair, angle=angle)
+    assert row["correct"] > 0 and row["precision"] >= 0.8, row
