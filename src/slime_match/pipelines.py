@@ -207,15 +207,8 @@ class RootSiftPipeline(BasePipeline):
         keypoints = _upright_unique(self.sift.detect(context.grey, None))
         if not keypoints:
             return _empty_features(0, self.device)
-        xy = np.array([k.pt for k in keypoints], np.float32)
-        scale = np.array([k.size / 2.0 for k in keypoints], np.float32)
-        laf = np.zeros((len(xy), 2, 3), np.float32)
-        laf[:, 0, 0] = laf[:, 1, 1] = scale
-        laf[:, :, 2] = xy
-        as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a)).to(self.device)  # noqa: E731
-        response = np.array([k.response for k in keypoints], np.float32)
-        return Features(as_tensor(laf), torch.zeros(len(xy), 0, device=self.device), as_tensor(response),
-                        as_tensor(laf))
+        laf, shape, response = self._frames(keypoints)
+        return Features(shape, torch.zeros(len(keypoints), 0, device=self.device), response, shape)
 
     def describe_fixed(self, context: SiftContext, features: Features, angle: float) -> Features:
         laf = features.laf.detach().cpu().numpy()
@@ -232,7 +225,15 @@ class RootSiftPipeline(BasePipeline):
             return _empty_features(128, self.device)
         descriptors = descriptors.astype(np.float32)
         descriptors /= np.maximum(descriptors.sum(1, keepdims=True), 1e-12)
-        descriptors = np.sqrt(descriptors)
+        laf, shape, response = self._frames(keypoints)
+        return Features(laf, torch.from_numpy(np.sqrt(descriptors)).to(self.device), response, shape)
+
+    def _frames(self, keypoints) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Oriented LAFs (N, 2, 3), upright LAFs of the same scale, and responses (N,) of OpenCV keypoints.
+
+        OpenCV's angle is in degrees in pixel coordinates (y down), the package's convention; the scale is
+        the keypoint radius, size / 2.
+        """
         xy = np.array([k.pt for k in keypoints], np.float32)
         scale = np.array([k.size / 2.0 for k in keypoints], np.float32)
         angle = np.radians(np.array([k.angle for k in keypoints], np.float32))
@@ -241,8 +242,7 @@ class RootSiftPipeline(BasePipeline):
         shape = laf.copy()
         shape[:, :, :2] = np.eye(2, dtype=np.float32) * scale[:, None, None]
         response = np.array([k.response for k in keypoints], np.float32)
-        as_tensor = lambda a: torch.from_numpy(np.ascontiguousarray(a)).to(self.device)  # noqa: E731
-        return Features(as_tensor(laf), as_tensor(descriptors), as_tensor(response), as_tensor(shape))
+        return tuple(torch.from_numpy(a).to(self.device) for a in (laf, shape, response))
 
     def match(self, features0, features1, size0, size1, candidate_filter=None) -> Matches:
         if len(features0) < 2 or len(features1) < 2:
