@@ -73,7 +73,7 @@ def test_slime_stages_and_viz(pair, tmp_path, capsys):
     assert {"block_pairs", "expansion", "plane_selection", "global_dtm"} <= set(summary["seconds"])
     stages = np.load(tmp_path / "stages.npz")
     assert stages["final_xy0"].shape == (summary["counts"]["matches"], 2)
-    code, out, err = _run(capsys, "viz", tmp_path / "stages.npz", *pair, "-o", tmp_path / "viz")
+    code, _out, err = _run(capsys, "viz", tmp_path / "stages.npz", *pair, "-o", tmp_path / "viz")
     assert code == 0, err
     assert {p.name for p in (tmp_path / "viz").iterdir()} == {
         f"{s}.png" for s in ("blocks", "tiles", "planes", "superset", "fbar", "ftheta", "tile_matches", "final")}
@@ -118,7 +118,7 @@ def test_bad_input_one_line_error_no_output(pair, tmp_path, capsys, case):
     (tmp_path / "notes.png").write_text("not an image")
     cv2.imwrite(str(tmp_path / "tiny.png"), np.zeros((16, 16, 3), np.uint8))
     out_dir = tmp_path / "out"
-    code, out, err = _run(capsys, "match", bad, pair[1], "-o", out_dir, "--method", "rootsift")
+    code, _out, err = _run(capsys, "match", bad, pair[1], "-o", out_dir, "--method", "rootsift")
     assert code == 2
     assert err.startswith("error: ") and err.count("\n") == 1 and "Traceback" not in err
     assert not out_dir.exists()

@@ -4,8 +4,8 @@ import cv2
 import numpy as np
 import pytest
 import torch
-
 from conftest import DATA, require
+
 from slime_match.config import make_config
 from slime_match.eval.metrics import correct_matches_homography
 from slime_match.io import load_image

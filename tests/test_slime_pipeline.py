@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 import torch
-
 from conftest import DATA, require
+
 from slime_match.config import make_config
 from slime_match.eval.datasets import rotate_image
 from slime_match.eval.metrics import correct_matches_homography
@@ -18,7 +18,7 @@ from slime_match.slime.blocks import make_blocks
 from slime_match.slime.pipeline import block_planes_to_original
 from slime_match.slime.refine import FlowGuide, global_dtm
 
-WEIGHT_FREE = dict(shape="baumberg", orientation="gradient", descriptor="rootsift")
+WEIGHT_FREE = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift"}
 
 
 def test_orientation_bin_centres_and_wrap():

@@ -6,8 +6,8 @@ These run Slime on 15 + 8 real pairs (tens of seconds each on a 2-core CPU): mar
 
 import numpy as np
 import pytest
-
 from conftest import DATA, require
+
 from slime_match.config import make_config
 from slime_match.eval.datasets import rotate_image
 from slime_match.eval.metrics import correct_matches_homography, coverage, valid_area_homography

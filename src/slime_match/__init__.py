@@ -8,11 +8,11 @@ Example:
 
 __version__ = "0.1.0"
 
-from .config import MatchConfig, make_config  # noqa: E402
-from .errors import ConfigError, ImageError, SlimeMatchError, WeightsNotFoundError  # noqa: E402
-from .io import load_image  # noqa: E402
-from .matcher import Matcher, match  # noqa: E402
-from .result import MatchResult  # noqa: E402
+from .config import MatchConfig, make_config
+from .errors import ConfigError, ImageError, SlimeMatchError, WeightsNotFoundError
+from .io import load_image
+from .matcher import Matcher, match
+from .result import MatchResult
 
 __all__ = [
     "ConfigError",

@@ -198,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-    except Exception as error:  # noqa: BLE001 - the CLI never shows a traceback unless --debug
+    except Exception as error:
         if args.debug:
             raise
         print(f"error: {type(error).__name__}: {error} (rerun with --debug for details)", file=sys.stderr)

@@ -73,7 +73,7 @@ class Matcher:
                                              threshold=config.threshold, seed=config.seed)
             inliers, model, kind = geometry.inliers, geometry.model, geometry.kind
             counts["inliers"] = int(np.sum(inliers))
-        counts["matches"] = int(len(xy0))
+        counts["matches"] = len(xy0)
         summary = {
             "slime_match_version": __version__,
             "method": config.method,

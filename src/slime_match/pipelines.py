@@ -15,8 +15,8 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from dataclasses import dataclass, field
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import cv2
@@ -207,7 +207,7 @@ class RootSiftPipeline(BasePipeline):
         keypoints = _upright_unique(self.sift.detect(context.grey, None))
         if not keypoints:
             return _empty_features(0, self.device)
-        laf, shape, response = self._frames(keypoints)
+        _laf, shape, response = self._frames(keypoints)
         return Features(shape, torch.zeros(len(keypoints), 0, device=self.device), response, shape)
 
     def describe_fixed(self, context: SiftContext, features: Features, angle: float) -> Features:
@@ -273,7 +273,7 @@ def _upright_unique(keypoints) -> list:
 
 
 def _empty_features(dim: int, device: torch.device) -> Features:
-    zeros = lambda *shape: torch.zeros(shape, device=device)  # noqa: E731
+    zeros = lambda *shape: torch.zeros(shape, device=device)
     return Features(zeros(0, 2, 3), zeros(0, dim), zeros(0), zeros(0, 2, 3))
 
 

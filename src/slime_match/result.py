@@ -77,6 +77,6 @@ class MatchResult:
         """Read a ``matches.npz`` written by :meth:`save` or by ``slime match``."""
         with np.load(path) as data:
             kind = "homography" if "H" in data else "fundamental" if "F" in data else None
-            model = data["H"] if "H" in data else data["F"] if "F" in data else None
-            inliers = data["inliers"] if "inliers" in data else None
+            model = data["H"] if "H" in data else data.get("F", None)
+            inliers = data.get("inliers", None)
             return cls(data["keypoints0"], data["keypoints1"], data["scores"], inliers, kind, model)

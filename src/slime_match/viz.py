@@ -7,10 +7,10 @@ import os
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from .io import save_figure  # noqa: E402
+from .io import save_figure
 
 
 def side_by_side(image0: np.ndarray, image1: np.ndarray) -> tuple[np.ndarray, float]:

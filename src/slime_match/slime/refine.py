@@ -11,7 +11,7 @@ from scipy.spatial import cKDTree
 
 from ..matching.dtm import DTMConfig, dtm_filter
 from ..pipelines import BasePipeline
-from .block_matching import ScaleLevel, shift_features, describe_fixed_bins, fixed_features, orientation_bin
+from .block_matching import ScaleLevel, describe_fixed_bins, fixed_features, orientation_bin, shift_features
 
 
 @dataclass

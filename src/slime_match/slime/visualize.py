@@ -8,13 +8,13 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.patches import Rectangle  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import Rectangle
 
-from ..errors import SlimeMatchError  # noqa: E402
-from ..io import load_image, save_figure  # noqa: E402
-from ..viz import draw_matches, side_by_side  # noqa: E402
+from ..errors import SlimeMatchError
+from ..io import load_image, save_figure
+from ..viz import draw_matches, side_by_side
 
 STAGES = ("blocks", "tiles", "planes", "superset", "fbar", "ftheta", "tile_matches", "final")
 
