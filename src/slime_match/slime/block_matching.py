@@ -4,11 +4,13 @@ Speed by design (the paper's SM "Slime running time"): keypoints, shapes and des
 once per image and block scale on the whole scaled image and shared by every block that contains the
 keypoint (a block owns the keypoints of its core, i.e. the block minus its 32 px padding); descriptors
 under a fixed orientation are computed once per (scale, orientation bin) and only for the keypoints that
-a block pair needs; RANSACs of all block pairs run as one batch.
+a block pair needs; RANSACs of all block pairs run as one batch.  ``build_levels(shared=False)`` is the
+paper prototype's alternative: each block crop (zero-padded box) is detected and described on its own.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 import multiprocessing
@@ -48,16 +50,19 @@ def torch_threads(count: int):
 
 @dataclass
 class ScaleLevel:
-    """The features of one image at one block scale, shared by all blocks of that scale.
+    """The features of one image at one block scale, shared by all blocks of that scale (or, with per-block
+    detection, the features of a single block).
 
     Attributes:
         factor: scaled size / original size.
         size: (H, W) of the scaled image.
-        context: the base pipeline's image context of the scaled image.
+        context: the base pipeline's image context: of the whole scaled image, or of one block crop.
         features: (N) features in scaled-image pixels, with the pipeline's own orientation.
-        blocks: indices (into the image's block list) of the blocks of this scale.
-        members: per block of this scale, the (n_b,) indices of the features in its core.
+        blocks: indices (into the image's block list) of the blocks of this level.
+        members: per block of this level, the (n_b,) indices of the features in its core.
         fixed: cache of fixed-orientation descriptors: bin -> (computed mask (N,), descriptors (N, D)).
+        origin: (x, y) scaled-image position of the context's pixel (0, 0): (0, 0) for the whole scaled
+            image, the box corner for a block crop (features are shifted by -origin when re-described).
     """
 
     factor: float
@@ -67,11 +72,40 @@ class ScaleLevel:
     blocks: list[int]
     members: list[np.ndarray]
     fixed: dict[int, tuple[np.ndarray, torch.Tensor | None]] = field(default_factory=dict)
+    origin: tuple[float, float] = (0.0, 0.0)
+
+
+def translate_features(features: Features, offset: tuple[float, float]) -> Features:
+    """The same features moved by ``offset`` (x, y) px: LAF and shape-frame centres alike."""
+    shift = torch.tensor(offset, dtype=features.laf.dtype, device=features.laf.device)
+    laf = features.laf.clone()
+    laf[:, :, 2] += shift
+    shape_laf = None
+    if features.shape_laf is not None:
+        shape_laf = features.shape_laf.clone()
+        shape_laf[:, :, 2] += shift
+    return Features(laf, features.descriptors, features.response, shape_laf)
+
+
+def _detect(pipeline: BasePipeline, context: Any, regions_only: bool) -> Features:
+    return pipeline.detect_regions(context) if regions_only else pipeline.detect(context)
+
+
+def _block_level(pipeline: BasePipeline, scaled: np.ndarray, index: int, block: Block,
+                 regions_only: bool) -> ScaleLevel:
+    """One block detected on its own crop; its core's features moved to scaled-image pixels."""
+    context = pipeline.prepare(block.crop(scaled))
+    local = _detect(pipeline, context, regions_only)
+    inside = block.in_core_local(local.xy.detach().cpu().numpy())
+    origin = (float(block.box[0]), float(block.box[1]))
+    features = translate_features(local.subset(torch.from_numpy(inside).to(local.laf.device)), origin)
+    return ScaleLevel(block.factor, scaled.shape[:2], context, features, [index],
+                      [np.arange(len(features))], origin=origin)
 
 
 def build_levels(pipeline: BasePipeline, image: np.ndarray, blocks: list[Block],
-                 regions_only: bool = False) -> list[ScaleLevel]:
-    """Detect and describe each block scale once on the whole (Lanczos-)scaled image.
+                 regions_only: bool = False, shared: bool = True) -> list[ScaleLevel]:
+    """Detect and describe the blocks: once per block scale on the whole (Lanczos-)scaled image, or per block.
 
     Args:
         pipeline: the base pipeline.
@@ -79,17 +113,24 @@ def build_levels(pipeline: BasePipeline, image: np.ndarray, blocks: list[Block],
         blocks: the image's blocks (``make_blocks``).
         regions_only: keep only the shape frames (no own orientation or descriptors): enough for regions
             that are only described under fixed orientations (the tiles, Sec. 3.8).
+        shared: True: one detection per scale shared by its blocks (each block owns the keypoints of its
+            core). False (the paper prototype): each block's zero-padded crop is detected and described on
+            its own and keeps the keypoints of its core.
 
     Returns:
-        One ScaleLevel per distinct block scale, in increasing scale index.
+        Shared: one ScaleLevel per distinct block scale, in increasing scale index. Per block: one
+        ScaleLevel per block, in block order. Features are in scaled-image pixels either way.
     """
     levels = []
     for scale_index in sorted({b.scale_index for b in blocks}):
         members_blocks = [i for i, b in enumerate(blocks) if b.scale_index == scale_index]
         factor = blocks[members_blocks[0]].factor
         scaled = resize_lanczos(image, factor)
+        if not shared:
+            levels += [_block_level(pipeline, scaled, i, blocks[i], regions_only) for i in members_blocks]
+            continue
         context = pipeline.prepare(scaled)
-        features = pipeline.detect_regions(context) if regions_only else pipeline.detect(context)
+        features = _detect(pipeline, context, regions_only)
         original = blocks[members_blocks[0]].to_original(features.xy.detach().cpu().numpy())
         inside = points_in_blocks(original, [blocks[i] for i in members_blocks])
         members = [inside.indices[inside.indptr[k]:inside.indptr[k + 1]] for k in range(len(members_blocks))]
@@ -99,7 +140,7 @@ def build_levels(pipeline: BasePipeline, image: np.ndarray, blocks: list[Block],
 
 def orientation_bin(angle: float, bins: int) -> int:
     """Index of the histogram bin whose centre is ``angle`` (radians), bins of 2 pi / bins from 0."""
-    return int(round(angle / (2 * math.pi / bins))) % bins
+    return round(angle / (2 * math.pi / bins)) % bins
 
 
 def describe_fixed_bins(pipeline: BasePipeline, level: ScaleLevel, requests: dict[int, np.ndarray],
@@ -117,8 +158,10 @@ def describe_fixed_bins(pipeline: BasePipeline, level: ScaleLevel, requests: dic
         missing = missing[~computed[missing]]
         if len(missing) == 0:
             continue
-        fresh = pipeline.describe_fixed(level.context, level.features.subset(torch.from_numpy(missing)),
-                                        bin_index * 2 * math.pi / bins)
+        regions = level.features.subset(torch.from_numpy(missing))
+        if level.origin != (0.0, 0.0):
+            regions = translate_features(regions, (-level.origin[0], -level.origin[1]))
+        fresh = pipeline.describe_fixed(level.context, regions, bin_index * 2 * math.pi / bins)
         if descriptors is None:
             descriptors = torch.zeros(n, fresh.descriptors.shape[1], device=fresh.descriptors.device)
         descriptors[torch.from_numpy(missing).to(descriptors.device)] = fresh.descriptors
@@ -205,7 +248,7 @@ def match_pairs(pipeline: BasePipeline, pairs: list[tuple[int, int]], get0: Pair
     _FORK_TASK = (pipeline, pairs, get0, get1, blocks0, blocks1)
     try:
         with multiprocessing.get_context("fork").Pool(workers) as pool:
-            chunks = pool.map(_match_chunk, list(zip(edges[:-1], edges[1:])))
+            chunks = pool.map(_match_chunk, list(itertools.pairwise(edges)))
     finally:
         _FORK_TASK = None
     return [m for chunk in chunks for m in chunk]
@@ -320,5 +363,14 @@ def _collect(pairs, hs, thetas, parts) -> BlockPairMatches:
                             cat["xy0"], cat["xy1"], cat["s0"], cat["s1"], cat["score"])
 
 
-__all__ = ["BlockPairMatches", "ScaleLevel", "build_levels", "describe_fixed_bins", "fixed_features", "shift_features",
-           "match_block_pairs", "orientation_bin"]
+__all__ = [
+    "BlockPairMatches",
+    "ScaleLevel",
+    "build_levels",
+    "describe_fixed_bins",
+    "fixed_features",
+    "match_block_pairs",
+    "orientation_bin",
+    "shift_features",
+    "translate_features",
+]

@@ -54,6 +54,9 @@ class SlimeConfig:
         workers: processes for the block-pair matching (None = one per CPU core on CPU, 1 on CUDA).
         refine_tiles: run Sec. 3.8 (tile re-matching + global DTM); False stops at F^theta.
         keep_stages: keep every stage's sets in the result (for ``slime viz`` / ``--save-stages``).
+        shared_detection: detect and describe each block scale once on the whole scaled image, each block
+            owning the keypoints of its core (ours, the sharing suggested by the paper's SM); False detects
+            on each 256 px block crop separately, as the paper's prototype (slower; tiles stay shared).
     """
 
     blocks: BlockConfig = field(default_factory=BlockConfig)
@@ -65,6 +68,7 @@ class SlimeConfig:
     workers: int | None = None
     refine_tiles: bool = True
     keep_stages: bool = False
+    shared_detection: bool = True
 
 
 @dataclass
@@ -151,7 +155,9 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     blocks0, blocks1 = make_blocks(h0, w0, config.blocks), make_blocks(h1, w1, config.blocks)
     tiles0, tiles1 = make_tiles(h0, w0, config.blocks), make_tiles(h1, w1, config.blocks)
     with timer("features"):
-        levels0, levels1 = build_levels(pipeline, image0, blocks0), build_levels(pipeline, image1, blocks1)
+        shared = config.shared_detection
+        levels0 = build_levels(pipeline, image0, blocks0, shared=shared)
+        levels1 = build_levels(pipeline, image1, blocks1, shared=shared)
         (tile_level0,) = build_levels(pipeline, image0, tiles0, regions_only=True)
         (tile_level1,) = build_levels(pipeline, image1, tiles1, regions_only=True)
     with timer("block_pairs"), torch_threads(1):

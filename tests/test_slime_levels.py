@@ -1,0 +1,121 @@
+"""Slime block levels: shared (one detection per scale) vs per-block detection (the paper's prototype)."""
+
+import cv2
+import numpy as np
+import pytest
+import torch
+from conftest import DATA, require
+
+from slime_match.config import make_config
+from slime_match.eval.metrics import correct_matches_homography
+from slime_match.io import load_image
+from slime_match.matcher import Matcher
+from slime_match.pipelines import BaseConfig, make_base_pipeline
+from slime_match.slime.block_matching import (
+    build_levels,
+    describe_fixed_bins,
+    fixed_features,
+    translate_features,
+)
+from slime_match.slime.blocks import make_blocks, points_in_blocks
+from slime_match.types import Features
+
+WEIGHT_FREE = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift"}
+SIZE = (240, 320)  # (H, W)
+
+
+def _squares() -> tuple[np.ndarray, np.ndarray]:
+    """(H, W, 3) grey image of bright 20 px squares on a dark ground, and their (4 S, 2) corners in px."""
+    h, w = SIZE
+    img = np.full((h, w), 0.2, np.float32)
+    corners = []
+    for y in range(30, 210, 50):
+        for x in range(30, 290, 55):
+            img[y:y + 20, x:x + 20] = 0.9
+            corners += [(x - 0.5, y - 0.5), (x + 19.5, y - 0.5), (x - 0.5, y + 19.5), (x + 19.5, y + 19.5)]
+    img = cv2.GaussianBlur(img, (0, 0), 1.0)
+    return np.repeat(img[:, :, None], 3, axis=2), np.array(corners)
+
+
+@pytest.fixture(scope="module")
+def levels():
+    image, corners = _squares()
+    pipeline = make_base_pipeline(BaseConfig(**WEIGHT_FREE))
+    blocks = [b for b in make_blocks(*SIZE) if b.scale_index == 0]  # factor 0.8: 256 x 192, two blocks
+    shared = build_levels(pipeline, image, blocks)
+    per_block = build_levels(pipeline, image, blocks, shared=False)
+    return pipeline, blocks, corners, shared, per_block
+
+
+def _nearest(points: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    d = np.linalg.norm(points[:, None] - xy[None], axis=2)
+    return d.min(axis=1), d.argmin(axis=1)
+
+
+def test_per_block_levels_one_per_block_with_core_keypoints(levels):
+    _, blocks, _, shared, per_block = levels
+    assert len(shared) == 1 and shared[0].blocks == [0, 1]
+    assert [lv.blocks for lv in per_block] == [[0], [1]]
+    assert blocks[1].box[0] > 0 and blocks[0].box[1] < 0  # both origin signs are exercised
+    for lv, block in zip(per_block, blocks):
+        assert lv.origin == (float(block.box[0]), float(block.box[1]))
+        assert np.array_equal(lv.members[0], np.arange(len(lv.features)))
+        inside = points_in_blocks(block.to_original(lv.features.xy.numpy()), [block]).toarray()[0]
+        assert len(lv.features) > 20 and inside.all()
+
+
+def test_square_corners_found_at_the_same_scaled_positions_by_both_modes(levels):
+    _, blocks, corners, shared, per_block = levels
+    scaled = blocks[0].to_scaled(corners)
+    d_shared, i_shared = _nearest(scaled, shared[0].features.xy.numpy())
+    xy_block = np.concatenate([lv.features.xy.numpy() for lv in per_block])
+    d_block, i_block = _nearest(scaled, xy_block)
+    assert d_shared.max() < 2.0 and d_block.max() < 2.0, (d_shared.max(), d_block.max())
+    gap = np.linalg.norm(shared[0].features.xy.numpy()[i_shared] - xy_block[i_block], axis=1)
+    assert gap.max() < 1.0, gap.max()
+    # shape frames move with the centres
+    for lv in per_block:
+        assert torch.equal(lv.features.shape_laf[:, :, 2], lv.features.laf[:, :, 2])
+
+
+def test_fixed_orientation_descriptors_use_the_crop_context(levels):
+    """Re-described per-block regions equal the shared ones: the crop-local frames sample the same pixels."""
+    pipeline, _, _, shared, per_block = levels
+    for k, lv in enumerate(per_block):
+        own = shared[0].members[k]
+        dist, j = _nearest(lv.features.xy.numpy(), shared[0].features.xy.numpy()[own])
+        same = np.nonzero(dist < 0.3)[0]
+        assert len(same) > 0.8 * len(lv.features)
+        describe_fixed_bins(pipeline, lv, {3: same}, 16)
+        describe_fixed_bins(pipeline, shared[0], {3: own[j[same]]}, 16)
+        ours = fixed_features(lv, same, 3, 16).descriptors
+        ref = fixed_features(shared[0], own[j[same]], 3, 16).descriptors
+        cosine = (ours * ref).sum(dim=1)
+        assert cosine.median() > 0.99 and (cosine > 0.8).float().mean() > 0.9, cosine.median()
+        # without the origin shift the same call samples other pixels: the check above can fail
+        wrong = pipeline.describe_fixed(lv.context, lv.features.subset(torch.from_numpy(same)), 3 * 2 * np.pi / 16)
+        assert (wrong.descriptors * ref).sum(dim=1).median() < 0.9
+
+
+def test_translate_features_moves_centres_only():
+    laf = torch.tensor([[[2.0, 0.5, 10.0], [0.0, 3.0, 20.0]]])
+    f = Features(laf, torch.ones(1, 4), torch.ones(1), laf.clone())
+    moved = translate_features(f, (-32.0, 5.0))
+    assert torch.equal(moved.xy, torch.tensor([[-22.0, 25.0]]))
+    assert torch.equal(moved.shape_laf[:, :, 2], torch.tensor([[-22.0, 25.0]]))
+    assert torch.equal(moved.laf[:, :, :2], laf[:, :, :2]) and torch.equal(f.laf, laf)
+
+
+@pytest.mark.slow
+def test_per_block_slime_end_to_end_on_a_real_pair():
+    """graf 1 -> 3 at 400 x 300 with per-block detection (about a minute on 2 idle cores)."""
+    folder = require(DATA / "oxford_graf")
+    a, b = load_image(folder / "img1.png"), load_image(folder / "img3.png")
+    s = np.diag([0.5, 0.5, 1.0])
+    s[:2, 2] = -0.25  # pixel-centre convention of a 2x downscale
+    a, b = (cv2.resize(im, (im.shape[1] // 2, im.shape[0] // 2), interpolation=cv2.INTER_AREA) for im in (a, b))
+    h = s @ np.loadtxt(folder / "H1to3p") @ np.linalg.inv(s)
+    result = Matcher(make_config("slime", shared_detection=False, **WEIGHT_FREE))(a, b)
+    ok = correct_matches_homography(result.keypoints0, result.keypoints1, h)
+    assert ok.sum() > 100 and ok.mean() >= 0.9, (int(ok.sum()), ok.mean())
+    assert result.summary["config"]["slime"]["shared_detection"] is False
