@@ -1,0 +1,274 @@
+"""Slime's speed next to its quality: per-stage seconds, peak memory, correct matches, the base Hz+ on the same
+pair, and the shared vs per-block detection ablation; OpenCV SIFT as a same-process reference.
+
+    python benchmarks/bench_slime.py [--out results/bench_slime.json] [--descriptor tfeat]
+    python benchmarks/bench_slime.py --device cuda --descriptor hardnet      # the GPU run
+
+Pairs: graf img1 -> img3 resized (cv2.INTER_AREA) to 640x480 and 1200x900; the GT homography is scaled with
+the resize in the pixel-centre convention ``x_s = (x + 0.5) f - 0.5`` (per axis: graf is 800x640).
+
+Runs (each Slime run is timed once, after the base Hz+ on the same pair and config has warmed the models):
+* Slime, AffNet + OriNet + ``--descriptor`` (TFeat by default), at 640x480 and 1200x900;
+* weight-free Slime (Baumberg + gradient orientation + RootSIFT) at 640x480;
+* the ablation at 640x480 weight-free: shared detection (one per block scale, ours) vs per-block detection
+  (each 256 px block crop on its own, the paper's prototype) -- same pair, same everything else;
+* OpenCV SIFT (8000 features) detect+describe of the same images.
+
+Quality: matches correct when the two-sided GT reprojection error is below t (paper t = 15 px, and 3 px),
+precision = correct / matches; coverage (paper, t = 15 px) over the GT valid area.
+Memory: "peak_rss_mb" = the process's resident-set high-water mark during the call (VmHWM, reset before
+it through /proc/self/clear_refs), "workers_maxrss_mb" = the largest resident set of any forked block-pair
+worker so far in this process (RUSAGE_CHILDREN cannot be reset; pages shared with the parent included),
+"cuda_peak_mb" = torch's allocator peak during the call. No pytest test times anything: this script
+is the timing record, run once on a quiet machine where possible (load average recorded).
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import json
+import os
+import platform
+import resource
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT.parent / "shared"
+if "TORCH_HOME" not in os.environ and (SHARED / "weights").is_dir():
+    os.environ["TORCH_HOME"] = str((SHARED / "weights").resolve())
+
+import cv2
+import numpy as np
+import torch
+
+from slime_match.config import make_config
+from slime_match.eval.metrics import DEFAULTS, correct_matches_homography, coverage, valid_area_homography
+from slime_match.io import load_image
+from slime_match.matcher import Matcher
+
+TARGETS_S = {
+    "slime_learned_640x480": 20.0,
+    "slime_learned_1200x900": 60.0,
+    "slime_weight-free_640x480": 8.0,
+    "slime_cuda_640x480": 3.0,
+}
+WEIGHT_FREE = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift"}
+SIZES = {"640x480": (640, 480), "1200x900": (1200, 900)}
+THRESHOLDS = (DEFAULTS.t_perp, 3.0)
+
+
+# ---------------------------------------------------------------------------------------------- data
+def load_pair(data: Path, width: int, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """graf img1, img3 as float RGB resized to (width, height) and the GT homography between the resized images."""
+    folder = data / "oxford_graf"
+    if not (folder / "img1.png").is_file():
+        raise SystemExit(f"graf images not found in {folder}: pass --data <folder holding oxford_graf/>")
+    images, scales = [], []
+    for name in ("img1.png", "img3.png"):
+        image = load_image(folder / name)
+        sx, sy = width / image.shape[1], height / image.shape[0]
+        scales.append(np.array([[sx, 0, 0.5 * sx - 0.5], [0, sy, 0.5 * sy - 0.5], [0, 0, 1.0]]))
+        images.append(np.ascontiguousarray(cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)))
+    h = scales[1] @ np.loadtxt(folder / "H1to3p") @ np.linalg.inv(scales[0])
+    return images[0], images[1], h
+
+
+# ---------------------------------------------------------------------------------------------- measuring
+def _status_mb(key: str) -> float | None:
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith(key + ":"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        return None
+    return None
+
+
+def _reset_peak() -> None:
+    """Return freed heap to the OS (glibc) and reset VmHWM to the current resident set (Linux)."""
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+    except OSError:
+        pass
+
+
+def _children_maxrss_mb() -> float:
+    kb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return kb / 2**20 if sys.platform == "darwin" else kb / 1024
+
+
+def quality(xy0: np.ndarray, xy1: np.ndarray, h: np.ndarray, shape: tuple[int, int]) -> dict[str, Any]:
+    """Correct matches and precision at each threshold, and the paper's coverage (t = 15 px)."""
+    out: dict[str, Any] = {"matches": len(xy0)}
+    for t in THRESHOLDS:
+        ok = correct_matches_homography(xy0, xy1, h, t=t)
+        out[f"correct_{t:g}px"] = int(ok.sum())
+        out[f"precision_{t:g}px"] = round(float(ok.mean()), 4) if len(ok) else 0.0
+    ok = correct_matches_homography(xy0, xy1, h, t=DEFAULTS.t_perp)
+    valid0, valid1 = valid_area_homography(h, shape, shape)
+    out["coverage"] = round(coverage(xy0[ok], xy1[ok], shape, shape, valid0, valid1, t=DEFAULTS.t_perp), 4)
+    return out
+
+
+def run_matcher(matcher: Matcher, pair: tuple[np.ndarray, np.ndarray, np.ndarray]) -> dict[str, Any]:
+    """One timed call of a configured matcher on a pair, with its summary's stages, counts, memory and quality."""
+    a, b, h = pair
+    if matcher.device.type == "cuda":
+        torch.cuda.reset_peak_memory_stats(matcher.device)
+    _reset_peak()
+    rss0 = _status_mb("VmRSS")
+    start = time.perf_counter()
+    result = matcher(a, b)
+    wall = time.perf_counter() - start
+    peak = _status_mb("VmHWM")
+    record: dict[str, Any] = {
+        "wall_s": round(wall, 3),
+        "seconds": result.summary["seconds"],
+        "counts": result.summary["counts"],
+        "peak_rss_mb": None if peak is None else round(peak, 1),
+        "rss_before_mb": None if rss0 is None else round(rss0, 1),
+        **quality(result.keypoints0, result.keypoints1, h, a.shape[:2]),
+    }
+    if matcher.config.method == "slime":
+        record["workers_maxrss_mb"] = round(_children_maxrss_mb(), 1)
+    if matcher.device.type == "cuda":
+        record["cuda_peak_mb"] = round(torch.cuda.max_memory_allocated(matcher.device) / 2**20, 1)
+    return record
+
+
+def bench_slime_vs_base(name: str, options: dict[str, Any], pair, device: str, target: float | None) -> dict:
+    """Base Hz+ (also the warm-up) then Slime with the same base options on one pair."""
+    base = run_matcher(Matcher(make_config("hz+", device=device, **options)), pair)
+    slime = run_matcher(Matcher(make_config("slime", device=device, **options)), pair)
+    out = {"options": options, "slime": slime, "base": base,
+           "slime_over_base_time": round(slime["wall_s"] / max(base["wall_s"], 1e-9), 2)}
+    if target is not None:
+        out["target_s"] = target
+        out["meets_target"] = slime["wall_s"] <= target
+    _print_comparison(name, out)
+    return out
+
+
+def bench_ablation(pair, device: str, shared_record: dict) -> dict:
+    """Weight-free Slime with per-block detection, next to the shared-detection run of the same pair."""
+    per_block = run_matcher(Matcher(make_config("slime", device=device, shared_detection=False, **WEIGHT_FREE)),
+                            pair)
+    out = {"shared": shared_record, "per_block": per_block,
+           "per_block_over_shared_time": round(per_block["wall_s"] / max(shared_record["wall_s"], 1e-9), 2)}
+    _print_ablation(out)
+    return out
+
+
+def bench_opencv_sift(pairs: dict[str, tuple]) -> dict:
+    sift = cv2.SIFT_create(nfeatures=8000)
+    out = {}
+    for size, (a, b, _) in pairs.items():
+        greys = [cv2.cvtColor((im * 255 + 0.5).astype(np.uint8), cv2.COLOR_RGB2GRAY) for im in (a, b)]
+        sift.detectAndCompute(greys[0], None)  # warm-up
+        start = time.perf_counter()
+        features = [len(sift.detectAndCompute(g, None)[0]) for g in greys]
+        out[size] = {"seconds_pair": round(time.perf_counter() - start, 3), "features": features}
+        print(f"OpenCV SIFT {size}: detect+describe of both images {out[size]['seconds_pair']:.2f} s, "
+              f"features {features}")
+    return out
+
+
+# ---------------------------------------------------------------------------------------------- printing
+def _quality_line(r: dict) -> str:
+    t = f"{DEFAULTS.t_perp:g}"
+    return (f"matches {r['matches']}, correct@{t}px {r[f'correct_{t}px']} (precision {r[f'precision_{t}px']:.3f}), "
+            f"correct@3px {r['correct_3px']} (precision {r['precision_3px']:.3f}), coverage {r['coverage']:.3f}")
+
+
+def _print_comparison(name: str, out: dict) -> None:
+    slime, base = out["slime"], out["base"]
+    target = f"   target <= {out['target_s']:g} s: {'met' if out['meets_target'] else 'MISSED'}" if "target_s" in out else ""
+    print(f"\n== {name}")
+    print(f"Slime  {slime['wall_s']:8.2f} s{target}")
+    print("   stages: " + ", ".join(f"{k} {v:.2f}" for k, v in slime["seconds"].items()))
+    print(f"   peak RSS {slime['peak_rss_mb']} MB (workers {slime.get('workers_maxrss_mb')} MB); "
+          f"{_quality_line(slime)}")
+    print("   counts: " + ", ".join(f"{k} {v}" for k, v in slime["counts"].items()))
+    print(f"Hz+    {base['wall_s']:8.2f} s   stages: " + ", ".join(f"{k} {v:.2f}" for k, v in base["seconds"].items()))
+    print(f"   peak RSS {base['peak_rss_mb']} MB; {_quality_line(base)}")
+    print(f"Slime / Hz+ time: {out['slime_over_base_time']:.1f}x")
+
+
+def _print_ablation(out: dict) -> None:
+    print("\n== ablation, weight-free Slime 640x480: shared vs per-block detection")
+    for key in ("shared", "per_block"):
+        r = out[key]
+        print(f"{key:9s} {r['wall_s']:8.2f} s  features {r['seconds'].get('features', 0):.2f} s, "
+              f"block_pairs {r['seconds'].get('block_pairs', 0):.2f} s; {_quality_line(r)}")
+    print(f"per-block / shared time: {out['per_block_over_shared_time']:.2f}x")
+
+
+# ---------------------------------------------------------------------------------------------- main
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--device", default="cpu", choices=("cpu", "cuda"), help="torch device")
+    parser.add_argument("--descriptor", default="tfeat", choices=("tfeat", "hardnet"),
+                        help="descriptor of the learned (AffNet + OriNet) runs")
+    parser.add_argument("--out", default="results/bench_slime.json", help="JSON output path")
+    parser.add_argument("--data", default=str(SHARED / "data"), help="folder holding oxford_graf/")
+    parser.add_argument("--skip-large", action="store_true", help="skip the 1200x900 run")
+    args = parser.parse_args(argv)
+    if args.device == "cuda" and not torch.cuda.is_available():
+        raise SystemExit("--device cuda: no CUDA device available")
+    sizes = {k: v for k, v in SIZES.items() if not (args.skip_large and k == "1200x900")}
+    pairs = {size: load_pair(Path(args.data), *wh) for size, wh in sizes.items()}
+    learned = f"affnet+orinet+{args.descriptor}"
+    report: dict[str, Any] = {
+        "meta": {
+            "date": datetime.now(UTC).isoformat(timespec="seconds"),
+            "command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
+            "device": "cpu" if args.device == "cpu" else torch.cuda.get_device_name(0),
+            "cpu_count": os.cpu_count(),
+            "torch_threads": torch.get_num_threads(),
+            "platform": platform.platform(),
+            "torch": torch.__version__,
+            "opencv": cv2.__version__,
+            "load_average_start": [round(x, 2) for x in os.getloadavg()],
+            "pair": "oxford graf img1 -> img3, cv2.INTER_AREA resize, GT homography scaled per axis",
+            "timing": "wall_s = one call after the base Hz+ call on the same pair and config (model warm-up); "
+            "seconds = the matcher summary's per-stage seconds",
+        },
+        "targets_s": TARGETS_S,
+        "runs": {},
+    }
+    print(f"device {report['meta']['device']}, load average {report['meta']['load_average_start']}")
+    runs = report["runs"]
+    for size in sizes:
+        key = "slime_cuda_640x480" if args.device == "cuda" and size == "640x480" else f"slime_learned_{size}"
+        runs[f"{learned} {size}"] = bench_slime_vs_base(f"Slime {learned} {size}", {"descriptor": args.descriptor},
+                                                        pairs[size], args.device, TARGETS_S[key])
+    weight_free = bench_slime_vs_base("Slime weight-free (Baumberg + gradient + RootSIFT) 640x480", WEIGHT_FREE,
+                                      pairs["640x480"], args.device, TARGETS_S["slime_weight-free_640x480"])
+    runs["weight-free 640x480"] = weight_free
+    runs["ablation shared vs per-block detection, weight-free 640x480"] = bench_ablation(
+        pairs["640x480"], args.device, weight_free["slime"])
+    print()
+    runs["opencv_sift"] = bench_opencv_sift(pairs)
+    report["meta"]["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
+
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.tmp")
+    tmp.write_text(json.dumps(report, indent=2))
+    tmp.replace(out)
+    print(f"\nwrote {out}  (load average {report['meta']['load_average_start']} -> "
+          f"{report['meta']['load_average_end']})")
+    return report
+
+
+if __name__ == "__main__":
+    main()
