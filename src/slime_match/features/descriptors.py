@@ -34,7 +34,7 @@ class DescriptorConfig:
 
     patch_size: int = 32
     magnification: float = 1.0
-    batch_size: int = 512
+    batch_size: int = 256
 
 
 def resolve_descriptor(name: str, weights_dir: str | Path | None = None) -> tuple[str, str | None]:

@@ -49,8 +49,9 @@ class PatchConfig:
             :func:`slime_match.features.descriptors.resolve_descriptor`).
         magnification: patch half-width over the detector ellipse, for every stage.
         patch_size: patch side in pixels (the networks need 32).
-        batch_size: patches per network batch. 512 is as fast as 2048 on CPU and bounds the activations:
-            peak memory of a 640x480 AffNet+OriNet+TFeat pair 484 -> 213 MB (benchmarks/bench_base.py).
+        batch_size: patches per network batch. On CPU 256 is ~20% faster than 2048 (activations stay in
+            the allocator's reused heap) and bounds memory: peak of a 640x480 AffNet+OriNet+TFeat pair
+            484 -> 150 MB (benchmarks/bench_base.py).
         weights_dir: folder of the weights; None for kornia's cache (``TORCH_HOME``).
     """
 
@@ -59,7 +60,7 @@ class PatchConfig:
     descriptor: str = "tfeat"
     magnification: float = 6.0
     patch_size: int = 32
-    batch_size: int = 512
+    batch_size: int = 256
     weights_dir: str | Path | None = None
 
     @classmethod

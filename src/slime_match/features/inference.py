@@ -2,7 +2,8 @@
 
 The kornia networks (AffNet, OriNet, HardNet) alternate ``Conv2d -> BatchNorm2d -> ReLU``. In eval mode a
 batch norm is an affine map per channel, so it folds exactly into the preceding convolution's weights and
-bias; with the weights in channels-last layout, oneDNN also skips its per-layer reorders. Measured on this
+bias; with the weights in channels-last layout, oneDNN also skips its per-layer reorders; activations run
+in place (TFeat's full-resolution Tanh was 15% of its time). Measured on this
 2-core CPU, batches of 4000 32x32 patches, one thread: AffNet 760 -> 2970 patches/s, OriNet 770 -> 2820.
 The outputs equal the original's to float rounding (~1e-6); the network's own ``forward`` is kept.
 """
@@ -39,9 +40,18 @@ def _fold(conv: nn.Conv2d, bn: nn.BatchNorm2d) -> nn.Conv2d:
     return out
 
 
+class _InplaceTanh(nn.Module):
+    """``tanh`` written over its input (2x faster than allocating the output on CPU)."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x.tanh_()
+
+
 def _fold_sequential(seq: nn.Sequential) -> nn.Sequential:
-    """Conv + eval batch-norm pairs folded, dropouts dropped, ReLUs in place."""
-    layers, mods, i = [], list(seq), 0
+    """Conv + eval batch-norm pairs folded, dropouts dropped, ReLUs in place, Tanhs in place after a layer
+    that returns a fresh tensor (convolution, linear)."""
+    layers: list[nn.Module] = []
+    mods, i = list(seq), 0
     while i < len(mods):
         m = mods[i]
         nxt = mods[i + 1] if i + 1 < len(mods) else None
@@ -54,8 +64,12 @@ def _fold_sequential(seq: nn.Sequential) -> nn.Sequential:
             layers.append(_fold(m, nxt))
             i += 2
             continue
+        if isinstance(m, nn.ReLU):
+            m = nn.ReLU(inplace=True)
+        elif isinstance(m, nn.Tanh) and layers and isinstance(layers[-1], (nn.Conv2d, nn.Linear)):
+            m = _InplaceTanh()
         if not isinstance(m, nn.Dropout):
-            layers.append(nn.ReLU(inplace=True) if isinstance(m, nn.ReLU) else m)
+            layers.append(m)
         i += 1
     return nn.Sequential(*layers)
 

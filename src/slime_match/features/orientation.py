@@ -37,7 +37,7 @@ class OrientationConfig:
 
     patch_size: int = 32
     magnification: float = 1.0
-    batch_size: int = 512
+    batch_size: int = 256
     num_angular_bins: int = 36
     angle: float = 0.0
 

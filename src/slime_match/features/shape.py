@@ -35,7 +35,7 @@ class ShapeConfig:
 
     patch_size: int = 32
     magnification: float = 1.0
-    batch_size: int = 512
+    batch_size: int = 256
     baumberg_iterations: int = 4
     max_anisotropy: float = 6.0
 
