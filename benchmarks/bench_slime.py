@@ -15,7 +15,9 @@ Runs (each Slime run is timed once, after the base Hz+ on the same pair and conf
 * OpenCV SIFT (8000 features) detect+describe of the same images.
 
 Quality: matches correct when the two-sided GT reprojection error is below t (paper t = 15 px, and 3 px),
-precision = correct / matches; coverage (paper, t = 15 px) over the GT valid area.
+precision = correct / matches; coverage (paper, t = 15 px) over the GT valid area; "distinct_1px" = matches
+left when near-duplicates (both ends within 1 px, L-inf) count once (overlapping blocks can find one
+corner twice at sub-pixel offsets, which the final exact-duplicate merge keeps).
 Memory: "peak_rss_mb" = the process's resident-set high-water mark during the call (VmHWM, reset before
 it through /proc/self/clear_refs), "workers_maxrss_mb" = the largest resident set of any forked block-pair
 worker so far in this process (RUSAGE_CHILDREN cannot be reset; pages shared with the parent included),
@@ -45,6 +47,9 @@ if "TORCH_HOME" not in os.environ and (SHARED / "weights").is_dir():
 import cv2
 import numpy as np
 import torch
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from slime_match.config import make_config
 from slime_match.eval.metrics import DEFAULTS, correct_matches_homography, coverage, valid_area_homography
@@ -106,9 +111,19 @@ def _children_maxrss_mb() -> float:
     return kb / 2**20 if sys.platform == "darwin" else kb / 1024
 
 
+def distinct_matches(xy0: np.ndarray, xy1: np.ndarray, radius: float = 1.0) -> int:
+    """Matches left when near-duplicates (both ends within ``radius`` px, chained) count once."""
+    if len(xy0) == 0:
+        return 0
+    pairs = cKDTree(np.hstack([xy0, xy1])).query_pairs(radius, p=np.inf, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(xy0), len(xy0)))
+    return int(connected_components(graph, directed=False)[0])
+
+
 def quality(xy0: np.ndarray, xy1: np.ndarray, h: np.ndarray, shape: tuple[int, int]) -> dict[str, Any]:
-    """Correct matches and precision at each threshold, and the paper's coverage (t = 15 px)."""
-    out: dict[str, Any] = {"matches": len(xy0)}
+    """Correct matches and precision at each threshold, the paper's coverage (t = 15 px), and the number of
+    distinct matches (near-duplicates within 1 px at both ends merged)."""
+    out: dict[str, Any] = {"matches": len(xy0), "distinct_1px": distinct_matches(xy0, xy1)}
     for t in THRESHOLDS:
         ok = correct_matches_homography(xy0, xy1, h, t=t)
         out[f"correct_{t:g}px"] = int(ok.sum())
@@ -185,7 +200,7 @@ def bench_opencv_sift(pairs: dict[str, tuple]) -> dict:
 # ---------------------------------------------------------------------------------------------- printing
 def _quality_line(r: dict) -> str:
     t = f"{DEFAULTS.t_perp:g}"
-    return (f"matches {r['matches']}, correct@{t}px {r[f'correct_{t}px']} (precision {r[f'precision_{t}px']:.3f}), "
+    return (f"matches {r['matches']} (distinct@1px {r['distinct_1px']}), correct@{t}px {r[f'correct_{t}px']} (precision {r[f'precision_{t}px']:.3f}), "
             f"correct@3px {r['correct_3px']} (precision {r['precision_3px']:.3f}), coverage {r['coverage']:.3f}")
 
 
