@@ -456,6 +456,13 @@ def main(argv: list[str] | None = None) -> dict:
         _print_run(t, run)
     torch.set_num_threads(default_threads)
     report["meta"]["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
+    busy = max(report["meta"]["load_average_start"][0], report["meta"]["load_average_end"][0])
+    if max(threads) > 1 and busy > (os.cpu_count() or 1):
+        report["meta"]["warning"] = (
+            f"load average {busy} > {os.cpu_count()} cores: multi-threaded timings are dominated by OpenMP "
+            "threads waiting for each other (oversubscription); the 1-thread figures are the load-robust ones"
+        )
+        print(f"\nWARNING: {report['meta']['warning']}")
 
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
