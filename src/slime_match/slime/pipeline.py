@@ -56,7 +56,8 @@ class SlimeConfig:
         keep_stages: keep every stage's sets in the result (for ``slime viz`` / ``--save-stages``).
         shared_detection: detect and describe each block scale once on the whole scaled image, each block
             owning the keypoints of its core (ours, the sharing suggested by the paper's SM); False detects
-            on each 256 px block crop separately, as the paper's prototype (slower; tiles stay shared).
+            on each 256 px block crop separately, as the paper's prototype (slower).
+        shared_tile_detection: the same choice for the full-resolution tiles of Sec. 3.8.
     """
 
     blocks: BlockConfig = field(default_factory=BlockConfig)
@@ -69,6 +70,7 @@ class SlimeConfig:
     refine_tiles: bool = True
     keep_stages: bool = False
     shared_detection: bool = True
+    shared_tile_detection: bool = True
 
 
 @dataclass
@@ -117,6 +119,11 @@ def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks
     return table, h, side
 
 
+def _keypoints(levels) -> np.ndarray:
+    """(N, 2) float64 keypoint positions of full-resolution levels."""
+    return np.concatenate([lv.features.xy.detach().cpu().numpy() for lv in levels]).astype(np.float64)
+
+
 def _workers(requested: int | None, pipeline: BasePipeline) -> int:
     """Worker processes for the block pairs: CUDA work stays in one process (CUDA does not survive fork)."""
     if requested is not None:
@@ -135,7 +142,7 @@ def select_planes(table: MatchTable, expanded, tiles0: list[Block], tiles1: list
     keep = epipolar_consistency(table, superset, t_perp=config.t_perp, t_xi=config.t_xi,
                                 min_union=config.min_union, chunk=config.chunk)
     filtered = superset.restrict(keep)
-    fbar = filtered.subset(greedy_two_per_tile(filtered, w))
+    fbar = filtered.subset(greedy_two_per_tile(filtered, w, t_ov=config.t_ov))
     fused = fuse_planes(sets.restrict(keep), fbar, w, t_ov=config.t_ov)
     ok, theta, theta_plus = global_orientation_filter(table, fused, bins=config.bins,
                                                       t_theta_plus=config.t_theta_plus)
@@ -158,8 +165,9 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         shared = config.shared_detection
         levels0 = build_levels(pipeline, image0, blocks0, shared=shared)
         levels1 = build_levels(pipeline, image1, blocks1, shared=shared)
-        (tile_level0,) = build_levels(pipeline, image0, tiles0, regions_only=True)
-        (tile_level1,) = build_levels(pipeline, image1, tiles1, regions_only=True)
+        shared = config.shared_tile_detection
+        tile_levels0 = build_levels(pipeline, image0, tiles0, regions_only=True, shared=shared)
+        tile_levels1 = build_levels(pipeline, image1, tiles1, regions_only=True, shared=shared)
     with timer("block_pairs"), torch_threads(1):
         bpm, counts = match_block_pairs(pipeline, levels0, levels1, blocks0, blocks1, config.ransac,
                                         bins=config.bins, min_matches=config.min_plane_matches, seed=seed,
@@ -184,18 +192,16 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         with timer("tile_refinement"), torch_threads(1):
             guide = FlowGuide(guide_xy0, guide_xy1, config.planes.t_perp)
             tile_xy0, tile_xy1, tile_scores = match_tiles(
-                pipeline, tile_level0, tile_level1, np.stack([ftheta.tile0, ftheta.tile1], 1),
-                selected["theta"], guide, [t.shape for t in tiles0], [t.box for t in tiles0],
-                [t.shape for t in tiles1], [t.box for t in tiles1], bins=config.tiles.bins)
+                pipeline, tile_levels0, tile_levels1, tiles0, tiles1, np.stack([ftheta.tile0, ftheta.tile1], 1),
+                selected["theta"], guide, bins=config.tiles.bins)
     counts["tile_matches"] = len(tile_xy0)
     with timer("global_dtm"):
         all0 = np.vstack([guide_xy0, tile_xy0])
         all1 = np.vstack([guide_xy1, tile_xy1])
         all_scores = np.concatenate([table.score[in_ftheta], tile_scores])
         if config.refine_tiles:
-            xy0, xy1, scores = global_dtm(all0, all1, all_scores, (h0, w0), (h1, w1),
-                                          tile_level0.features.xy.cpu().numpy().astype(np.float64),
-                                          tile_level1.features.xy.cpu().numpy().astype(np.float64),
+            xy0, xy1, scores = global_dtm(all0, all1, all_scores, (h0, w0), (h1, w1), _keypoints(tile_levels0),
+                                          _keypoints(tile_levels1),
                                           getattr(getattr(pipeline, "config", None), "dtm", None))
         else:
             order = np.argsort(all_scores, kind="stable")

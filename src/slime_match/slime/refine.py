@@ -11,6 +11,7 @@ from scipy.spatial import cKDTree
 
 from ..matching.dtm import DTMConfig, dtm_filter
 from ..pipelines import BasePipeline
+from .blocks import Block
 from .block_matching import ScaleLevel, describe_fixed_bins, fixed_features, orientation_bin, shift_features
 
 
@@ -45,21 +46,20 @@ class FlowGuide:
 
 def match_tiles(
     pipeline: BasePipeline,
-    level0: ScaleLevel,
-    level1: ScaleLevel,
+    levels0: list[ScaleLevel],
+    levels1: list[ScaleLevel],
+    tiles0: list[Block],
+    tiles1: list[Block],
     tile_pairs: np.ndarray,
     thetas: np.ndarray,
     guide: FlowGuide,
-    tile_sizes0: list[tuple[int, int]],
-    tile_boxes0: list[tuple[float, float, float, float]],
-    tile_sizes1: list[tuple[int, int]],
-    tile_boxes1: list[tuple[float, float, float, float]],
     bins: int = 16,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Base pipeline (no RANSAC) on the tile pairs of F^theta with the plane's fixed orientation.
 
     Args:
-        level0, level1: full-resolution features shared by the tiles (``members`` per tile).
+        levels0, levels1: full-resolution tile features (``build_levels`` on the tiles, shared or per tile).
+        tiles0, tiles1: the tiles of each image.
         tile_pairs: (S, 2) tile indices (c, c') of each set of F^theta.
         thetas: (S,) the set's relative orientation theta^l_v (radians): theta = 0 in image 0, theta in 1.
         guide: the flow filter applied to the candidates before DTM.
@@ -67,26 +67,30 @@ def match_tiles(
     Returns:
         xy0, xy1 (T, 2) and scores (T,) of the tile matches, in original pixels.
     """
+    where0 = {c: (level, i) for level in levels0 for i, c in enumerate(level.blocks)}
+    where1 = {c: (level, i) for level in levels1 for i, c in enumerate(level.blocks)}
     jobs = sorted({(c0, c1, orientation_bin(theta, bins))
                    for (c0, c1), theta in zip(tile_pairs.tolist(), thetas.tolist())})
-    describe_fixed_bins(pipeline, level0, {0: np.concatenate([level0.members[c0] for c0, _, _ in jobs])}, bins)
-    requests1: dict[int, list] = {}
-    for _, c1, b in jobs:
-        requests1.setdefault(b, []).append(level1.members[c1])
-    describe_fixed_bins(pipeline, level1, {b: np.concatenate(parts) for b, parts in requests1.items()}, bins)
+    requests: dict[int, tuple[ScaleLevel, dict[int, list]]] = {}
+    for c0, c1, b in jobs:
+        for (level, i), bin_index in ((where0[c0], 0), (where1[c1], b)):
+            requests.setdefault(id(level), (level, {}))[1].setdefault(bin_index, []).append(level.members[i])
+    for level, wanted in requests.values():
+        describe_fixed_bins(pipeline, level, {b: np.concatenate(parts) for b, parts in wanted.items()}, bins)
     out0, out1, scores = [], [], []
     for c0, c1, b in jobs:
-        f0 = fixed_features(level0, level0.members[c0], 0, bins)
-        f1 = fixed_features(level1, level1.members[c1], b, bins)
+        (level0, i0), (level1, i1) = where0[c0], where1[c1]
+        f0 = fixed_features(level0, level0.members[i0], 0, bins)
+        f1 = fixed_features(level1, level1.members[i1], b, bins)
         if len(f0) < 4 or len(f1) < 4:
             continue
-        box0, box1 = tile_boxes0[c0], tile_boxes1[c1]
+        box0, box1 = tiles0[c0].box, tiles1[c1].box
         offset0, offset1 = np.array(box0[:2]), np.array(box1[:2])
 
         def flow_filter(y0, y1, offset0=offset0, offset1=offset1):
             return guide(y0 + offset0, y1 + offset1)
 
-        m = pipeline.match(shift_features(f0, box0), shift_features(f1, box1), tile_sizes0[c0], tile_sizes1[c1],
+        m = pipeline.match(shift_features(f0, box0), shift_features(f1, box1), tiles0[c0].shape, tiles1[c1].shape,
                            candidate_filter=flow_filter)
         if len(m) == 0:
             continue

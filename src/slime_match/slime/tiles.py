@@ -415,10 +415,15 @@ def epipolar_consistency(
 
 
 def greedy_two_per_tile(
-    sets: TileSets, weights: np.ndarray | None = None, max_per_tile: int = 2
+    sets: TileSets, weights: np.ndarray | None = None, max_per_tile: int = 2, t_ov: float | None = None
 ) -> np.ndarray:
     """F-bar: sets by decreasing cardinality, each added unless one of its tiles (c in image 1 or c' in
     image 2) is already shared by ``max_per_tile`` added sets; empty sets are skipped (paper Sec. 3.6).
+
+    With ``t_ov``, a set overlapping an added set of the same tile pair by IoU > t_ov is the same plane
+    (the fusion of Sec. 3.7 merges them anyway): it is skipped without taking a tile's slot, so that the
+    two slots of a tile go to two different planes (background and foreground) and not to near-copies of
+    one plane found by overlapping block pairs.
 
     Returns:
         Indices of the added sets, in the order they were added.
@@ -428,14 +433,30 @@ def greedy_two_per_tile(
     order = order[size[order] > 0]
     used0 = np.zeros(int(sets.tile0.max(initial=-1)) + 1, np.int64)
     used1 = np.zeros(int(sets.tile1.max(initial=-1)) + 1, np.int64)
+    same_plane = _near_copies(sets, weights, t_ov) if t_ov is not None else None
+    added = np.zeros(len(sets), bool)
     out = []
     for s in order:  # sequential by definition; one step per set, not per match
+        if same_plane is not None and added[same_plane.indices[same_plane.indptr[s]:same_plane.indptr[s + 1]]].any():
+            continue
         c0, c1 = sets.tile0[s], sets.tile1[s]
         if used0[c0] < max_per_tile and used1[c1] < max_per_tile:
             used0[c0] += 1
             used1[c1] += 1
+            added[s] = True
             out.append(s)
     return np.asarray(out, np.int64)
+
+
+def _near_copies(sets: TileSets, weights: np.ndarray | None, t_ov: float) -> sp.csr_matrix:
+    """(S, S) CSR: pairs of distinct sets of the same tile pair with (weighted) IoU > t_ov."""
+    w = np.ones(sets.n_matches) if weights is None else np.asarray(weights, np.float64)
+    inter = (sets.matrix(w) @ sets.matrix().astype(np.float64).T).tocoo()
+    i, j, v = inter.row, inter.col, inter.data
+    size = sets.sizes(w)
+    same_pair = (sets.tile0[i] == sets.tile0[j]) & (sets.tile1[i] == sets.tile1[j]) & (i != j)
+    ok = same_pair & (v / (size[i] + size[j] - v) > t_ov)
+    return sp.csr_matrix((np.ones(int(ok.sum()), bool), (i[ok], j[ok])), shape=(len(sets), len(sets)))
 
 
 def fuse_planes(
