@@ -158,7 +158,7 @@ def test_greedy_two_per_tile():
 def test_greedy_two_per_tile_skips_near_copies_of_one_plane():
     # sets 0 and 1: the same tile pair, IoU 8/12 (near copies of one plane); set 2: another plane on tile 0;
     # set 3: a third plane on tile 0. Without t_ov the copy takes the second slot of tile 0.
-    rows = [range(0, 10), range(2, 12), range(20, 28), range(30, 36)]
+    rows = [range(10), range(2, 12), range(20, 28), range(30, 36)]
     ts = _sets(rows, 40, tile0=[0, 0, 0, 0], tile1=[1, 1, 2, 3])
     assert greedy_two_per_tile(ts).tolist() == [0, 1]
     assert greedy_two_per_tile(ts, t_ov=1 / 3).tolist() == [0, 2]

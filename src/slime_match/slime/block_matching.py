@@ -205,12 +205,9 @@ class BlockPairMatches:
     scores: np.ndarray
 
 
-def shift_features(features: Features, box: tuple[float, float, float, float]) -> Features:
-    """The same features with LAF centres shifted into a block's own frame."""
-    laf = features.laf.clone()
-    laf[:, 0, 2] -= box[0]
-    laf[:, 1, 2] -= box[1]
-    return Features(laf, features.descriptors, features.response, features.shape_laf)
+def to_block_frame(features: Features, block: Block) -> Features:
+    """The same features in a block's own pixel frame (the block image's top-left pixel at (0, 0))."""
+    return translate_features(features, (-block.box[0], -block.box[1]))
 
 
 PairFeatures = Callable[[tuple[int, int]], Features]
@@ -225,7 +222,7 @@ def _match_one(pipeline: BasePipeline, pair: tuple[int, int], get0: PairFeatures
     if len(f0) < 4 or len(f1) < 4:
         return Matches.empty()
     b0, b1 = blocks0[pair[0]], blocks1[pair[1]]
-    return pipeline.match(shift_features(f0, b0.box), shift_features(f1, b1.box), b0.shape, b1.shape)
+    return pipeline.match(to_block_frame(f0, b0), to_block_frame(f1, b1), b0.shape, b1.shape)
 
 
 def _match_chunk(bounds: tuple[int, int]) -> list[Matches]:
@@ -371,6 +368,6 @@ __all__ = [
     "fixed_features",
     "match_block_pairs",
     "orientation_bin",
-    "shift_features",
+    "to_block_frame",
     "translate_features",
 ]

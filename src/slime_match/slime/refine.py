@@ -11,8 +11,8 @@ from scipy.spatial import cKDTree
 
 from ..matching.dtm import DTMConfig, dtm_filter
 from ..pipelines import BasePipeline
+from .block_matching import ScaleLevel, describe_fixed_bins, fixed_features, orientation_bin, to_block_frame
 from .blocks import Block
-from .block_matching import ScaleLevel, describe_fixed_bins, fixed_features, orientation_bin, shift_features
 
 
 @dataclass
@@ -84,14 +84,13 @@ def match_tiles(
         f1 = fixed_features(level1, level1.members[i1], b, bins)
         if len(f0) < 4 or len(f1) < 4:
             continue
-        box0, box1 = tiles0[c0].box, tiles1[c1].box
-        offset0, offset1 = np.array(box0[:2]), np.array(box1[:2])
+        offset0, offset1 = np.array(tiles0[c0].box[:2]), np.array(tiles1[c1].box[:2])
 
         def flow_filter(y0, y1, offset0=offset0, offset1=offset1):
             return guide(y0 + offset0, y1 + offset1)
 
-        m = pipeline.match(shift_features(f0, box0), shift_features(f1, box1), tiles0[c0].shape, tiles1[c1].shape,
-                           candidate_filter=flow_filter)
+        m = pipeline.match(to_block_frame(f0, tiles0[c0]), to_block_frame(f1, tiles1[c1]), tiles0[c0].shape,
+                           tiles1[c1].shape, candidate_filter=flow_filter)
         if len(m) == 0:
             continue
         out0.append(f0.xy[torch.from_numpy(m.idx0)].cpu().numpy())
