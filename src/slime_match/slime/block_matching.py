@@ -290,8 +290,9 @@ def match_block_pairs(
             continue
         f0, f1 = own0(pair), own1(pair)
         m_in = m.subset(res.inliers)
-        rho = (f1.angle[torch.from_numpy(m_in.idx1)] - f0.angle[torch.from_numpy(m_in.idx0)]).cpu().numpy()
-        thetas[pair] = relative_orientation(np.zeros_like(rho), rho, bins=bins)
+        angle0 = f0.angle[torch.from_numpy(m_in.idx0)].cpu().numpy()
+        angle1 = f1.angle[torch.from_numpy(m_in.idx1)].cpu().numpy()
+        thetas[pair] = relative_orientation(angle0, angle1, bins=bins)
 
     # 3.3: re-run with fixed orientations on the pairs that produced a plane.
     refined_pairs = list(thetas)
