@@ -29,7 +29,7 @@ def draw_matches(
     keypoints0: np.ndarray,
     keypoints1: np.ndarray,
     colors=None,
-    max_lines: int = 3000,
+    max_lines: int = 600,
     seed: int = 0,
     title: str | None = None,
 ) -> None:
@@ -45,25 +45,26 @@ def draw_matches(
     canvas, offset = side_by_side(image0, image1)
     ax.imshow(canvas)
     ax.set_axis_off()
-    if title:
-        ax.set_title(title, fontsize=9)
     count = len(keypoints0)
-    if count == 0:
-        return
     index = np.arange(count)
     if count > max_lines:
         index = np.sort(np.random.default_rng(seed).choice(count, max_lines, replace=False))
+        title = f"{title or ''} (lines: {max_lines} random matches; dots: all)".strip()
+    if title:
+        ax.set_title(title, fontsize=9)
+    if count == 0:
+        return
     colors = np.asarray("lime" if colors is None else colors, dtype=object if colors is None else float)
     per_match = colors.ndim == 2
     segments = np.stack([keypoints0[index], keypoints1[index] + [offset, 0.0]], axis=1)
     from matplotlib.collections import LineCollection
 
-    lines = LineCollection(segments, colors=colors[index] if per_match else str(colors), linewidths=0.6,
-                           alpha=0.6)
+    lines = LineCollection(segments, colors=colors[index] if per_match else str(colors), linewidths=0.5,
+                           alpha=0.5)
     ax.add_collection(lines)
-    point_colors = colors[index] if per_match else str(colors)
-    ax.scatter(segments[:, 0, 0], segments[:, 0, 1], s=1.5, c=point_colors, linewidths=0)
-    ax.scatter(segments[:, 1, 0], segments[:, 1, 1], s=1.5, c=point_colors, linewidths=0)
+    point_colors = colors if per_match else str(colors)
+    ax.scatter(keypoints0[:, 0], keypoints0[:, 1], s=1.0, c=point_colors, linewidths=0)
+    ax.scatter(keypoints1[:, 0] + offset, keypoints1[:, 1], s=1.0, c=point_colors, linewidths=0)
 
 
 def plot_matches(image0: np.ndarray, image1: np.ndarray, result, path: str | os.PathLike,
