@@ -120,8 +120,9 @@ def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks
 
 
 def _keypoints(levels) -> np.ndarray:
-    """(N, 2) float64 keypoint positions of full-resolution levels."""
-    return np.concatenate([lv.features.xy.detach().cpu().numpy() for lv in levels]).astype(np.float64)
+    """(N, 2) float64 keypoint positions of full-resolution levels (none when there are no levels)."""
+    xy = [lv.features.xy.detach().cpu().numpy().astype(np.float64) for lv in levels]
+    return np.concatenate(xy) if xy else np.zeros((0, 2))
 
 
 def _workers(requested: int | None, pipeline: BasePipeline) -> int:
@@ -165,9 +166,6 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         shared = config.shared_detection
         levels0 = build_levels(pipeline, image0, blocks0, shared=shared)
         levels1 = build_levels(pipeline, image1, blocks1, shared=shared)
-        shared = config.shared_tile_detection
-        tile_levels0 = build_levels(pipeline, image0, tiles0, regions_only=True, shared=shared)
-        tile_levels1 = build_levels(pipeline, image1, tiles1, regions_only=True, shared=shared)
     with timer("block_pairs"), torch_threads(1):
         bpm, counts = match_block_pairs(pipeline, levels0, levels1, blocks0, blocks1, config.ransac,
                                         bins=config.bins, min_matches=config.min_plane_matches, seed=seed,
@@ -188,7 +186,12 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     guide_xy0, guide_xy1 = table.xy0[in_ftheta], table.xy1[in_ftheta]
     tile_xy0 = tile_xy1 = np.zeros((0, 2))
     tile_scores = np.zeros(0)
+    tile_levels0 = tile_levels1 = []
     if config.refine_tiles and len(ftheta):
+        with timer("features"):
+            shared = config.shared_tile_detection
+            tile_levels0 = build_levels(pipeline, image0, tiles0, regions_only=True, shared=shared)
+            tile_levels1 = build_levels(pipeline, image1, tiles1, regions_only=True, shared=shared)
         with timer("tile_refinement"), torch_threads(1):
             guide = FlowGuide(guide_xy0, guide_xy1, config.planes.t_perp)
             tile_xy0, tile_xy1, tile_scores = match_tiles(
