@@ -15,15 +15,15 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from slime_match.errors import ConfigError
 from slime_match.geometry.fundamental import epipolar_distance
 from slime_match.geometry.homography import project, two_sided_error
+from slime_match.options import config_from_dict
 
 logger = logging.getLogger("slime_match")
 
@@ -53,11 +53,7 @@ class MetricConfig:
     @classmethod
     def from_options(cls, **options: object) -> MetricConfig:
         """Config with some fields overridden; unknown names raise ConfigError."""
-        names = {f.name for f in fields(cls)}
-        bad = sorted(set(options) - names)
-        if bad:
-            raise ConfigError(f"unknown metric option(s) {bad}; valid: {sorted(names)}")
-        return cls(**options)
+        return config_from_dict(cls, options)
 
 
 DEFAULTS = MetricConfig()

@@ -23,7 +23,7 @@ large supports; non-planar scenes may prefer less (3-4).
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
@@ -33,6 +33,7 @@ from slime_match.features.descriptors import Descriptor, DescriptorConfig
 from slime_match.features.laf import PatchPyramid, ellipse_to_laf, set_laf_angle
 from slime_match.features.orientation import OrientationConfig, Orienter
 from slime_match.features.shape import ShapeConfig, ShapeEstimator
+from slime_match.options import config_from_dict
 from slime_match.types import Features, Keypoints
 
 logger = logging.getLogger("slime_match")
@@ -66,11 +67,7 @@ class PatchConfig:
     @classmethod
     def from_dict(cls, options: dict) -> PatchConfig:
         """Config from a dict; unknown keys raise :class:`ConfigError`."""
-        known = {f.name for f in fields(cls)}
-        bad = sorted(set(options) - known)
-        if bad:
-            raise ConfigError(f"unknown patch option(s) {bad}; known: {sorted(known)}")
-        return cls(**options)
+        return config_from_dict(cls, options)
 
 
 class LocalFeatureExtractor:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -24,6 +24,7 @@ import torch.nn.functional as F
 from scipy.spatial import cKDTree
 
 from slime_match.errors import ConfigError, ImageError
+from slime_match.options import config_from_dict
 from slime_match.types import Keypoints
 
 logger = logging.getLogger("slime_match")
@@ -71,11 +72,7 @@ class HarrisZConfig:
     @classmethod
     def from_dict(cls, options: dict) -> HarrisZConfig:
         """Build a config from a dict of option names, raising ConfigError for unknown names."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(options) - known)
-        if unknown:
-            raise ConfigError(f"unknown HarrisZ+ option(s) {unknown}; valid options: {sorted(known)}")
-        return cls(**options)
+        return config_from_dict(cls, options)
 
 
 def detect_harrisz(image: torch.Tensor, config: HarrisZConfig | None = None) -> Keypoints:

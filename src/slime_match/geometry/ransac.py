@@ -8,7 +8,6 @@ draw up to one batch more models than a strictly sequential RANSAC would.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 from dataclasses import dataclass
 from typing import TypeVar
@@ -24,6 +23,7 @@ from slime_match.geometry.fundamental import (
 )
 from slime_match.geometry.homography import _inverse, homography_dlt, homography_dlt_batch
 from slime_match.geometry.sampling import sample_subsets, sample_subsets_varying
+from slime_match.options import config_from_dict
 from slime_match.types import GeometryResult
 
 logger = logging.getLogger("slime_match")
@@ -96,11 +96,7 @@ def make_config(cls: type[_C], config: _C | dict | None) -> _C:
     if config is None:
         config = cls()
     elif isinstance(config, dict):
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(config) - names)
-        if unknown:
-            raise ConfigError(f"unknown {cls.__name__} options {unknown}; valid: {sorted(names)}")
-        config = cls(**config)
+        config = config_from_dict(cls, config)
     elif not isinstance(config, cls):
         raise ConfigError(f"expected {cls.__name__}, a dict or None, got {type(config).__name__}")
     if not config.threshold > 0:

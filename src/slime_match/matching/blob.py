@@ -8,12 +8,13 @@ column located farther than ``context_radius`` from the partner keypoint.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from ..errors import ConfigError
+from ..options import config_from_dict
 from ..types import Matches
 from .nn import knn, nearest_far
 
@@ -44,11 +45,7 @@ class BlobConfig:
     @classmethod
     def from_dict(cls, options: dict) -> BlobConfig:
         """Config from a dict; unknown keys raise ConfigError."""
-        names = {f.name for f in fields(cls)}
-        unknown = set(options) - names
-        if unknown:
-            raise ConfigError(f"unknown BlobConfig option(s) {sorted(unknown)}: valid are {sorted(names)}")
-        return cls(**options)
+        return config_from_dict(cls, options)
 
 
 def greedy_many_to_many(rows: np.ndarray, cols: np.ndarray, values: np.ndarray, max_per: int) -> np.ndarray:

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import logging
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from functools import cached_property
 
 import cv2
@@ -44,6 +44,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ConfigError
+from ..options import config_from_dict
 
 log = logging.getLogger("slime_match")
 _PARALLEL_MIN = 6000  # points (candidates + unmatched) from which both meshes are built in two threads
@@ -79,11 +80,7 @@ class DTMConfig:
     @classmethod
     def from_dict(cls, options: dict) -> DTMConfig:
         """Config from a dict; unknown keys raise ConfigError."""
-        names = {f.name for f in fields(cls)}
-        unknown = set(options) - names
-        if unknown:
-            raise ConfigError(f"unknown DTMConfig option(s) {sorted(unknown)}: valid are {sorted(names)}")
-        return cls(**options)
+        return config_from_dict(cls, options)
 
 
 @dataclass
