@@ -150,6 +150,10 @@ def test_greedy_survivors_matches_sequential_walk():
     np.testing.assert_array_equal(dtm_module._greedy_survivors(a[sel], b[sel], alive), ref)
 
 
+def cross(u, v):
+    return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+
+
 def test_delaunay_and_locate_match_scipy():
     g = np.random.default_rng(0)
     pts = np.unique(np.rint(g.uniform(0, 300, (500, 2))), axis=0)
@@ -157,20 +161,63 @@ def test_delaunay_and_locate_match_scipy():
     tri = dtm_module._Triangulation.of(pts)
     ref = Delaunay(pts)
     # same triangle count and area as Qhull (ties between cocircular points may flip a few edges)
-    area = lambda s: np.abs(dtm_module._cross(pts[s[:, 1]] - pts[s[:, 0]], pts[s[:, 2]] - pts[s[:, 0]])).sum()
-    assert len(tri.simplices) == len(ref.simplices) and area(tri.simplices) == area(ref.simplices)
-    q = g.uniform(-0.5, 300.5, (2000, 2))
-    found = dtm_module._locate(tri, q, cKDTree(pts).query(q)[1])
-    assert np.all(found >= 0)
-    corners = pts[tri.simplices[found]]  # (P, 3, 2): q inside its triangle (barycentric test)
-    lam = np.stack([dtm_module._cross(corners[:, (k + 1) % 3] - q, corners[:, (k + 2) % 3] - q)
-                    for k in range(3)], 1)
-    assert np.all(lam >= -1e-9)
+    area = lambda s: cross(pts[s[:, 1]] - pts[s[:, 0]], pts[s[:, 2]] - pts[s[:, 0]])
+    assert len(tri.simplices) == len(ref.simplices) and area(tri.simplices).sum() == np.abs(area(ref.simplices)).sum()
+    assert np.all(area(tri.simplices) > 0)  # counter-clockwise in x-right, y-down axes
+    for q in (g.uniform(-0.5, 300.5, (2000, 2)), np.rint(g.uniform(-1, 301, (2000, 2)))):  # integer: on edges
+        found = dtm_module._locate(tri, q, cKDTree(pts).query(q)[1])
+        assert np.all(found >= 0)
+        corners = pts[tri.simplices[found]]  # (P, 3, 2): q inside its triangle (barycentric test)
+        lam = np.stack([cross(corners[:, (k + 1) % 3] - q, corners[:, (k + 2) % 3] - q) for k in range(3)], 1)
+        assert np.all(lam >= -1e-9)
     # neighbours are symmetric and share an edge
     t, k = np.nonzero(tri.neighbors >= 0)
     assert np.all((tri.neighbors[tri.neighbors[t, k]] == t[:, None]).any(1))
     far = np.array([[-50.0, 0.0], [400.0, 400.0]])
     assert np.all(dtm_module._locate(tri, far, cKDTree(pts).query(far)[1]) == -1)
+
+
+def test_delaunay_reuse_matches_fresh_subdivisions():
+    """One _Delaunay for many point sets with the same bounds gives the fresh Subdiv2D's triangles."""
+    g = np.random.default_rng(3)
+    delaunay = dtm_module._Delaunay((-1, -1), (60, 40))
+    for n in (3, 20, 200, 800):  # small grids: many cocircular ties
+        pts = np.unique(np.rint(g.uniform(0, [60, 40], (n, 2))), axis=0)
+        pts = np.r_[[[-1, -1], [60, 40]], pts[g.permutation(len(pts))]]
+        np.testing.assert_array_equal(delaunay(pts), dtm_module._Delaunay.around(pts)(pts))
+
+
+def test_near_pairs_and_classify_match_brute_force():
+    """Near pairs from the mesh edges and the near / more-than-two-edges-apart tests against graph
+    distances computed on a dense adjacency matrix."""
+    g = np.random.default_rng(4)
+    size = (120, 160)
+    vxy = np.unique(np.rint(g.uniform(0, [159, 119], (150, 2))), axis=0)
+    vertex = np.sort(g.choice(len(vxy), 60, replace=False))
+    unmatched = np.unique(np.rint(g.uniform(0, [159, 119], (80, 2))), axis=0)
+    unmatched = unmatched[~(unmatched[:, None] == vxy[None]).all(2).any(1)]
+    mesh = dtm_module._triangulate(vertex, vxy, size, unmatched, DTMConfig(),
+                                   dtm_module._Delaunay((-1, -1), (size[1], size[0])))
+    n, big = len(vertex), len(mesh.tri.points)
+    adj = np.zeros((big, big), bool)
+    adj[mesh.tri.half_edges[:, 0], mesh.tri.half_edges[:, 1]] = True
+    within_two = adj | (adj.astype(int) @ adj.astype(int) > 0) | np.eye(big, dtype=bool)
+    near = adj | np.eye(big, dtype=bool)
+    # units: 1 to 3 per kept vertex
+    unit_point = np.repeat(np.arange(n), g.integers(1, 4, n))
+    units = g.permutation(len(unit_point)) + 5  # arbitrary ids
+    order = np.argsort(unit_point, kind="stable")
+    a, b = dtm_module._near_pairs(units[order], np.bincount(unit_point, minlength=n), mesh)
+    point_of = dict(zip(units, unit_point))
+    got = {(min(x, y), max(x, y)) for x, y in zip(a, b)}
+    assert len(got) == len(a)  # each pair once
+    expected = {(min(x, y), max(x, y)) for i, x in enumerate(units) for y in units[i + 1:]
+                if near[point_of[x], point_of[y]]}
+    assert got == expected
+    p, q = g.integers(0, n, (2, 3000))
+    is_near, is_far = dtm_module._classify(mesh, p, q)
+    np.testing.assert_array_equal(is_near, near[p, q])
+    np.testing.assert_array_equal(is_far, ~within_two[p, q])
 
 
 def test_real_pair_blob_then_dtm(data_dir):

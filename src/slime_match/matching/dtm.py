@@ -25,19 +25,26 @@ candidates, ~6-20% correct, used to collapse to 2 matches):
   best-scored outliers, which are the majority there, removed the inliers around them.
 - *Settling.* Contraction stops at an iteration that would remove fewer than ``settle_fraction`` of the
   alive units (and does not remove them): the long tail of iterations removing a few units each costs
-  most of the time and expansion
-  restores the same final set.
+  most of the time and expansion restores the same final set.
 
-Everything is sparse: adjacency as sorted int64 pair keys, OpenCV's incremental Delaunay (``Subdiv2D``,
-several times faster than Qhull on integer positions), vectorised point location by a visibility walk.
+Implementation: everything is sparse and vectorised. Meshes come from OpenCV's incremental Delaunay
+(``Subdiv2D``, several times faster than Qhull on integer positions; one reused per image) and are only
+rebuilt when an image's vertex set changes. Contraction works on unordered unit pairs: the near pairs of
+each image are enumerated from its mesh edges and the units grouped by vertex, then classified in the
+other image with per-point bitsets of kept Delaunay neighbours (near: one bit; two edges apart: a bit of a
+neighbour). Expansion locates points by a vectorised visibility walk; a unit's test in an image only
+depends on the kept set, so a rejected unit is tested again only after the set grows, and image 1 only
+tests the units that image 0 accepts (its mesh is not built when none is).
 """
 
 from __future__ import annotations
 
 import logging
+import math
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
-from functools import cached_property
+from dataclasses import dataclass, field
+from functools import cached_property, lru_cache
 
 import cv2
 import numpy as np
@@ -48,6 +55,7 @@ from ..options import config_from_dict
 
 log = logging.getLogger("slime_match")
 _PARALLEL_MIN = 6000  # points (candidates + unmatched) from which both meshes are built in two threads
+_RIDGE = 1.0  # px^2, local affine fits: negligible against real neighbourhoods, decisive for degenerate ones
 
 
 @dataclass
@@ -98,32 +106,43 @@ class DTMResult:
     restored: np.ndarray
 
 
-def _delaunay(points: np.ndarray) -> np.ndarray:
-    """(T, 3) int64 Delaunay triangles of unique integer-valued points (OpenCV's incremental Subdiv2D),
-    counter-clockwise in x-right, y-down pixel axes (positive cross product).
+class _Delaunay:
+    """Delaunay triangulations (OpenCV's incremental ``Subdiv2D``) of unique integer points with given
+    bounds, reusing one Subdiv2D (re-initialised per call, it keeps its memory) and one position lookup.
 
     Args:
-        points: (P, 2) float64 unique integer positions, P >= 3 and not all collinear.
+        lo, hi: (x, y) smallest and largest coordinates of every point set to triangulate (the ring's
+            corners in a mesh); the Subdiv2D box and the insertion order, hence ties, depend on them.
     """
-    lo = points.min(0).astype(np.int64) - 2
-    span = points.max(0).astype(np.int64) - lo + 3
-    # a far bounding box keeps Subdiv2D's virtual outer vertices from shadowing hull triangles
-    far = 50 * int(span.max())
-    box = (int(lo[0]) - far, int(lo[1]) - far, int(span[0]) + 2 * far, int(span[1]) + 2 * far)
-    subdiv = cv2.Subdiv2D(box)
-    # insertion along a snake of horizontal strips keeps Subdiv2D's point location walks short
-    strip = max(int(4 * np.sqrt(span[0] * span[1] / len(points))), 1)
-    row = (points[:, 1].astype(np.int64) - lo[1]) // strip
-    subdiv.insert(points[np.lexsort((np.where(row % 2 == 0, points[:, 0], -points[:, 0]), row))]
-                  .astype(np.float32))
-    corners = np.rint(subdiv.getTriangleList().reshape(-1, 2)).astype(np.int64) - lo
-    index = np.empty(int(span[0] * span[1]), np.int64)  # position -> point lookup, only written cells read
-    index[(points.astype(np.int64) - lo) @ np.array([1, span[0]])] = np.arange(len(points))
-    simp = index[corners @ np.array([1, span[0]])].reshape(-1, 3)
-    d = points[simp[:, 1:]] - points[simp[:, :1]]
-    flip = d[:, 0, 0] * d[:, 1, 1] - d[:, 0, 1] * d[:, 1, 0] < 0
-    simp[flip] = simp[flip][:, [0, 2, 1]]
-    return simp
+
+    def __init__(self, lo: Sequence[int], hi: Sequence[int]) -> None:
+        x0, self.y0 = lo[0] - 2, lo[1] - 2
+        self.w, self.h = hi[0] - x0 + 3, hi[1] - self.y0 + 3
+        # a far bounding box keeps Subdiv2D's virtual outer vertices from shadowing hull triangles
+        far = 50 * max(self.w, self.h)
+        self.box = (x0 - far, self.y0 - far, self.w + 2 * far, self.h + 2 * far)
+        self.to_cell, self.first_cell = np.array([1, self.w]), x0 + self.w * self.y0
+        self.index = np.empty(self.w * self.h, np.int64)  # cell -> point, only written cells read
+        self.subdiv = cv2.Subdiv2D()
+
+    @classmethod
+    def around(cls, points: np.ndarray) -> _Delaunay:
+        """For the given points."""
+        return cls(points.min(0).astype(int).tolist(), points.max(0).astype(int).tolist())
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        """(T, 3) int64 triangles of (P, 2) float64 unique integer points within the bounds, P >= 3 and not
+        all collinear."""
+        self.subdiv.initDelaunay(self.box)
+        ip = points.astype(np.int64)
+        x = ip[:, 0]
+        # insertion along a snake of horizontal strips keeps Subdiv2D's point location walks short
+        strip = max(int(4 * math.sqrt(self.w * self.h / len(points))), 1)
+        row = (ip[:, 1] - self.y0) // strip
+        self.subdiv.insert(points[np.lexsort((np.where(row & 1, -x, x), row))])
+        self.index[ip @ self.to_cell - self.first_cell] = np.arange(len(points))
+        corners = self.subdiv.getTriangleList().reshape(-1, 2) @ self.to_cell
+        return self.index[corners.astype(np.int64) - self.first_cell].reshape(-1, 3)
 
 
 @dataclass
@@ -132,7 +151,8 @@ class _Triangulation:
 
     Attributes:
         points: (P, 2) float64 integer-valued vertex positions.
-        simplices: (T, 3) int64 counter-clockwise vertex indices (see ``_delaunay``).
+        simplices: (T, 3) int64 vertex indices, counter-clockwise in x-right, y-down pixel axes (positive
+            cross product).
         half_edges: (3 T, 2) directed Delaunay edges: every pair of neighbours once in each direction,
             except along the hull, where only border vertices lie.
     """
@@ -142,23 +162,54 @@ class _Triangulation:
     half_edges: np.ndarray
 
     @classmethod
-    def of(cls, points: np.ndarray) -> _Triangulation:
-        """Triangulate unique integer-valued (P, 2) points."""
-        simp = _delaunay(points)
+    def of(cls, points: np.ndarray, delaunay: _Delaunay | None = None) -> _Triangulation:
+        """Triangulate unique integer-valued (P, 2) points, with ``delaunay`` if given."""
+        simp = (delaunay or _Delaunay.around(points))(points)
+        y = points[:, 1][simp]
+        flip = np.einsum("tk,tk->t", points[:, 0][simp], y[:, [1, 2, 0]] - y[:, [2, 0, 1]]) < 0  # twice the area
+        if flip.any():
+            simp[flip] = simp[flip][:, [0, 2, 1]]
         # the edge facing corner k runs from corner k + 1 to corner k + 2
-        return cls(points, simp, np.stack([simp[:, [1, 2, 0]], simp[:, [2, 0, 1]]], 2).reshape(-1, 2))
+        return cls(points, simp, simp[:, [1, 2, 2, 0, 0, 1]].reshape(-1, 2))
 
     @cached_property
     def neighbors(self) -> np.ndarray:
         """(T, 3) triangle across the edge facing each corner, -1 on the hull."""
-        half, n = self.half_edges, len(self.points)
+        a, b = self.half_edges.T
         # the twin of a half edge runs the other way in the neighbouring triangle
-        undirected = np.minimum(half[:, 0], half[:, 1]) * n + np.maximum(half[:, 0], half[:, 1])
-        order = np.argsort(undirected, kind="stable")
-        twin = np.full(len(half), -1, np.int64)
-        same = undirected[order][1:] == undirected[order][:-1]
-        twin[order[1:][same]], twin[order[:-1][same]] = order[:-1][same], order[1:][same]
-        return np.where(twin >= 0, twin // 3, -1).reshape(-1, 3)
+        undirected = np.minimum(a, b) * len(self.points) + np.maximum(a, b)
+        order = undirected.argsort()
+        pair = (undirected[order[1:]] == undirected[order[:-1]]).nonzero()[0]
+        a, b = order[pair], order[pair + 1]
+        out = np.full(len(undirected), -1)
+        out[a], out[b] = b // 3, a // 3
+        return out.reshape(-1, 3)
+
+    @cached_property
+    def walk(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Tables of ``_locate`` and ``_transfer_ok``, with an extra triangle T standing for the outside.
+
+        Move 0 from a triangle stays in it, move k = 1, 2, 3 crosses the edge facing corner k - 1.
+
+        Returns:
+            lines: (T + 1, 4, 3) per triangle and move k, (a, b, c) with a x + b y + c twice the signed
+                area of the crossed edge and the point (x, y), >= 0 on the triangle's side (0 for move 0
+                and for triangle T, which thus holds every point).
+            across: (T + 1, 4) the triangle each move leads to, T when it leaves the hull.
+            start: (P,) a triangle at each point (the last one in ``simplices``).
+            proper: (T + 1,) the triangle has a positive area (False for triangle T, also read at index -1).
+        """
+        t = len(self.simplices)
+        x, y = self.points[:, 0][self.simplices], self.points[:, 1][self.simplices]
+        x1, y1, x2, y2 = x[:, [1, 2, 0]], y[:, [1, 2, 0]], x[:, [2, 0, 1]], y[:, [2, 0, 1]]  # edge facing k
+        lines = np.zeros((t + 1, 4, 3))
+        lines[:t, 1:, 0], lines[:t, 1:, 1], lines[:t, 1:, 2] = y1 - y2, x2 - x1, x1 * y2 - y1 * x2
+        across = np.full((t + 1, 4), t)
+        across[:t, 0] = np.arange(t)
+        across[:t, 1:] = np.where(self.neighbors < 0, t, self.neighbors)
+        start = np.empty(len(self.points), np.int64)
+        start[self.simplices.ravel()] = np.arange(t).repeat(3)
+        return lines, across, start, lines[:, :, 2].sum(1) > 0  # the constant terms sum to twice the area
 
 
 @dataclass
@@ -167,28 +218,96 @@ class _Mesh:
 
     Attributes:
         tri: triangulation; points [0, n) are the kept vertices (``vertex`` ids), the rest are border.
-        vertex: (n,) global vertex id of each non-border point.
+        vertex: (n,) global vertex id of each non-border point, ascending.
+        local: (V,) point index of each global vertex, -1 for those not kept.
         edges: (E, 2) undirected Delaunay edges between non-border points (local indices, a < b).
     """
 
     tri: _Triangulation
     vertex: np.ndarray
+    local: np.ndarray
     edges: np.ndarray
+    _affine: tuple[bytes, tuple[np.ndarray, np.ndarray]] | None = field(default=None, init=False, repr=False)
+
+    @cached_property
+    def adjacency(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+        """Delaunay neighbours, border points included.
+
+        Returns:
+            neighbours: (3 T,) the neighbours of each point, grouped by point (CSR); first: (P,) start of
+            each point's group; degree: (P,) its size; bits, words: (P * words,) uint32, the kept vertices
+            among each point's neighbours as a bitset of ``words`` words (bit q % 32 of word q // 32).
+        """
+        n, size = len(self.vertex), len(self.tri.points)
+        src, dst = self.tri.half_edges.T
+        degree = np.bincount(src, minlength=size)
+        words = (n + 31) // 32
+        kept = dst < n
+        bits = np.zeros(size * words, np.uint32)
+        np.bitwise_or.at(bits, src[kept] * words + (dst[kept] >> 5),
+                         np.left_shift(np.uint32(1), (dst[kept] & 31).astype(np.uint32)))
+        return dst[src.argsort()], degree.cumsum() - degree, degree, bits, words
+
+    @cached_property
+    def near(self) -> tuple[np.ndarray, np.ndarray]:
+        """(E + n,) vertex pairs a, b whose units are near: the edges between kept vertices, then each
+        kept vertex with itself."""
+        n = len(self.vertex)
+        return np.concatenate([self.edges[:, 0], np.arange(n)]), np.concatenate([self.edges[:, 1], np.arange(n)])
+
+    @cached_property
+    def neighbourhoods(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The closed neighbourhoods of the kept vertices, for ``_local_affine``.
+
+        Returns:
+            w: (N,) member of each (centre, member) pair, grouped by centre; each group: the edges where
+                the centre is the first end, then those where it is the second, then the centre itself.
+            f: (N, 3) design row (w - centre, 1) of each pair.
+            first: (n,) start of each group.
+            mat: (n, 3, 3) ridge-regularised normal matrix of each group.
+        """
+        n = len(self.vertex)
+        src = self.tri.points[:n]
+        v = np.concatenate([self.edges[:, 0], self.edges[:, 1], np.arange(n)])
+        w = np.concatenate([self.edges[:, 1], self.edges[:, 0], np.arange(n)])
+        order = np.argsort(v, kind="stable")
+        v, w = v[order], w[order]
+        count = np.bincount(v, minlength=n)  # >= 1: every vertex is in its own neighbourhood
+        first = count.cumsum() - count
+        f = np.column_stack([src[w] - src[v], np.ones(len(v))])
+        mat = np.add.reduceat((f[:, :, None] * f[:, None, :]).reshape(-1, 9), first).reshape(n, 3, 3)
+        mat[:, [0, 1], [0, 1]] += _RIDGE
+        return w, f, first, mat
+
+    def local_affine(self, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``_local_affine(self, dst)``, remembered for the last dst."""
+        key = dst.tobytes()
+        if self._affine is None or self._affine[0] != key:
+            self._affine = key, _local_affine(self, dst)
+        return self._affine[1]
+
+    @cached_property
+    def tree(self) -> cKDTree:
+        """k-d tree of the kept vertices."""
+        return cKDTree(self.tri.points[: len(self.vertex)])
 
 
-def _border_ring(size: tuple[int, int], n_vertices: int, scale: float) -> np.ndarray:
-    """(R, 2) integer points along the four image sides, 1 px outside the pixel grid."""
+@lru_cache(maxsize=256)
+def _border_ring(size: tuple[int, int], step: int) -> np.ndarray:
+    """(R, 2) integer points every ``step`` px along the four image sides, 1 px outside the pixel grid
+    (cached, read-only)."""
     h, w = size
-    step = max(round(float(scale * np.sqrt(w * h / max(n_vertices, 1)))), 1)
     xs = np.append(np.arange(-1, w, step), w).astype(np.float64)
     ys = np.arange(step - 1, h, step, dtype=np.float64)
     x = np.concatenate([xs, xs, np.full_like(ys, -1.0), np.full_like(ys, float(w))])
     y = np.concatenate([np.full_like(xs, -1.0), np.full_like(xs, float(h)), ys, ys])
-    return np.stack([x, y], 1)
+    ring = np.stack([x, y], 1)
+    ring.flags.writeable = False
+    return ring
 
 
 def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int],
-                 unmatched: np.ndarray | None, cfg: DTMConfig) -> _Mesh:
+                 unmatched: np.ndarray | None, cfg: DTMConfig, delaunay: _Delaunay) -> _Mesh:
     """Delaunay mesh of the given vertices, the border ring and the carving unmatched keypoints.
 
     The unmatched keypoints that share a Delaunay triangle with the ring (in the triangulation of
@@ -196,24 +315,28 @@ def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int
     long triangles over areas without kept matches now touch a border vertex.
 
     Args:
-        vertex: (n,) global ids of the kept vertices; vertex_xy: (V, 2) integer positions of all vertices.
+        vertex: (n,) ascending global ids of the kept vertices; vertex_xy: (V, 2) integer positions of all
+            vertices.
         unmatched: (U >= 1, 2) unique rounded unmatched keypoints of this image off all candidate vertices,
             or None.
+        delaunay: triangulator of this image's points (the ring's bounds).
     """
     pts = vertex_xy[vertex]
     n = len(pts)
-    border = _border_ring(size, n, cfg.border_spacing)
+    h, w = size
+    border = _border_ring(size, max(round(float(cfg.border_spacing * math.sqrt(w * h / max(n, 1)))), 1))
     if unmatched is not None:
         first_free = n + len(border)
-        s = _delaunay(np.concatenate([pts, border, unmatched]))
-        ring_tri = s[((s >= n) & (s < first_free)).any(1)]
+        s = delaunay(np.concatenate([pts, border, unmatched]))
+        ring_corners = s[((s >= n) & (s < first_free)).any(1)].ravel()
         carved = np.zeros(len(unmatched), bool)
-        carved[ring_tri[ring_tri >= first_free] - first_free] = True
+        carved[ring_corners[ring_corners >= first_free] - first_free] = True
         border = np.concatenate([border, unmatched[carved]])
-    tri = _Triangulation.of(np.concatenate([pts, border]))
+    tri = _Triangulation.of(np.concatenate([pts, border]), delaunay)
     e = tri.half_edges
-    e = e[(e[:, 0] < e[:, 1]) & (e[:, 1] < n)]
-    return _Mesh(tri, vertex, e)
+    local = np.full(len(vertex_xy), -1, np.int64)
+    local[vertex] = np.arange(n)
+    return _Mesh(tri, vertex, local, e[(e[:, 0] < e[:, 1]) & (e[:, 1] < n)])
 
 
 def _locate(tri: _Triangulation, q: np.ndarray, near: np.ndarray) -> np.ndarray:
@@ -221,84 +344,63 @@ def _locate(tri: _Triangulation, q: np.ndarray, near: np.ndarray) -> np.ndarray:
 
     Vectorised visibility walk from a triangle at a vertex near each query (``tri.neighbors`` across the
     edge facing the most negative barycentric coordinate); it terminates on Delaunay triangulations.
+    Exact on integer-valued queries.
 
     Args:
         q: (P, 2) query points; near: (P,) index of a vertex of ``tri`` close to each query.
     """
-    pts, simp, nbr = tri.points, tri.simplices, tri.neighbors
-    start = np.empty(len(pts), np.int64)
-    start[simp.ravel()] = np.repeat(np.arange(len(simp)), 3)
+    lines, across, start, _ = tri.walk
+    qh = np.ones((len(q), 3))
+    qh[:, :2] = q
     cur = start[near]
-    out = np.full(len(q), -1, np.int64)
-    todo = np.arange(len(q))
-    for _ in range(len(simp) + 1):
-        if not len(todo):
+    for _ in range(len(tri.simplices) + 1):
+        # the first smallest of (0, barycentric coordinates): stay when none is negative
+        move = np.einsum("pkj,pj->pk", lines.take(cur, 0), qh).argmin(1)
+        prev, cur = cur, across.take(4 * cur + move)
+        if cur.tobytes() == prev.tobytes():
             break
-        d = pts[simp[cur[todo]]] - q[todo, None, :]  # (m, 3, 2) corners relative to the query
-        d1, d2 = d[:, [1, 2, 0]], d[:, [2, 0, 1]]
-        lam = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]  # (m, 3) twice the barycentric areas
-        inside = (lam >= 0).all(1)
-        out[todo[inside]] = cur[todo[inside]]
-        step = nbr[cur[todo], np.argmin(lam, 1)]
-        move = ~inside & (step >= 0)
-        cur[todo[move]] = step[move]
-        todo = todo[move]
-    return out
+    return np.where((cur == prev) & (cur < len(tri.simplices)), cur, -1)
 
 
-def _row_keys(xy: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """int64 key of integer positions inside the image."""
-    return xy[:, 1].astype(np.int64) * (size[1] + 2) + xy[:, 0].astype(np.int64)
+def _near_pairs(grouped: np.ndarray, count: np.ndarray, mesh: _Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Unit pairs (a, b) near in this image: on one vertex (each pair once, a < b) or on the two ends of a
+    mesh edge.
 
+    Args:
+        grouped: (A,) the alive units, grouped by vertex in mesh order; count: (n,) their number on each
+            kept vertex (>= 1).
 
-def _near_pairs(unit_vertex: np.ndarray, alive: np.ndarray, mesh: _Mesh, n_units: int) -> np.ndarray:
-    """Sorted int64 keys a * n_units + b of ordered unit pairs a != b, both alive, near in this image."""
-    units = np.flatnonzero(alive)
-    n = len(mesh.vertex)
-    local = np.full(unit_vertex.max() + 1, -1, np.int64)
-    local[mesh.vertex] = np.arange(n)
-    lv = local[unit_vertex[units]]
-    order = np.argsort(lv, kind="stable")
-    units, lv = units[order], lv[order]
-    count = np.bincount(lv, minlength=n)
-    start = np.cumsum(count) - count
-    a = np.concatenate([mesh.edges[:, 0], mesh.edges[:, 1], np.arange(n)])
-    b = np.concatenate([mesh.edges[:, 1], mesh.edges[:, 0], np.arange(n)])
-    pairs = count[a] * count[b]
-    e = np.repeat(np.arange(len(a)), pairs)
-    offset = np.arange(len(e)) - np.repeat(np.cumsum(pairs) - pairs, pairs)
-    ua = units[start[a[e]] + offset // count[b[e]]]
-    ub = units[start[b[e]] + offset % count[b[e]]]
-    keys = ua * n_units + ub
-    return np.sort(keys[ua != ub])
-
-
-def _within_two(mesh: _Mesh, unit_vertex: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(P,) whether the vertices of units a and b in this mesh are at most two Delaunay edges apart.
-
-    The middle vertex may be a border vertex: an edge over an empty area in one image may well pass on
-    the other side of a carving keypoint in the other image.
+    Returns:
+        a, b: (N,) unit ids.
     """
-    n = len(mesh.tri.points)
-    local = np.full(unit_vertex.max() + 1, -1, np.int64)
-    local[mesh.vertex] = np.arange(len(mesh.vertex))
-    edge = np.sort(mesh.tri.half_edges[:, 0] * n + mesh.tri.half_edges[:, 1])  # CSR order by source
-    deg = np.bincount(edge // n, minlength=n)
-    start = np.cumsum(deg) - deg
-    qa, qb = local[unit_vertex[a]], local[unit_vertex[b]]
-    # every path qa -> k -> qb: k runs over the neighbours of qa
-    path = np.repeat(np.arange(len(qa)), deg[qa])
-    group = np.cumsum(deg[qa]) - deg[qa]
-    middle = edge[np.arange(len(path)) - group[path] + start[qa][path]] % n
-    hop = np.zeros(len(qa), bool)
-    hop[path[_member(edge, middle * n + qb[path])]] = True
-    return hop | _member(edge, qa * n + qb)
+    start = count.cumsum() - count
+    va, vb = mesh.near
+    pairs = count[va] * count[vb]
+    pair_of = np.arange(len(va)).repeat(pairs)
+    offset = np.arange(len(pair_of)) - (pairs.cumsum() - pairs).repeat(pairs)
+    va, vb = va[pair_of], vb[pair_of]
+    a = grouped[start[va] + offset // count[vb]]
+    b = grouped[start[vb] + offset % count[vb]]
+    keep = (va != vb) | (a < b)
+    return a[keep], b[keep]
 
 
-def _member(sorted_keys: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """(Q,) whether each query key is in the sorted int64 keys."""
-    pos = np.minimum(np.searchsorted(sorted_keys, q), len(sorted_keys) - 1)
-    return sorted_keys[pos] == q
+def _classify(mesh: _Mesh, p: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Whether kept mesh points p and q (Q,) are near (one point or Delaunay neighbours) and whether they
+    are more than two Delaunay edges apart (paths through border points included): (Q,) bool each."""
+    neighbours, first, degree, bits, words = mesh.adjacency
+    near = (p == q) | ((bits[p * words + (q >> 5)] >> (q & 31)) & 1 == 1)
+    rest = (~near).nonzero()[0]
+    p, q = p[rest], q[rest]
+    swap = degree[p] > degree[q]
+    p, q = np.where(swap, q, p), np.where(swap, p, q)  # p: the end with fewer neighbours
+    d = degree[p]
+    path = np.arange(len(p)).repeat(d)  # every path p -> k -> q: k runs over the neighbours of p
+    k = neighbours[np.arange(len(path)) + (first[p] - (d.cumsum() - d)).repeat(d)]
+    q = q[path]
+    far = ~near
+    far[rest[path[(bits[k * words + (q >> 5)] >> (q & 31)) & 1 == 1]]] = False
+    return near, far
 
 
 def _greedy_survivors(a: np.ndarray, b: np.ndarray, alive: np.ndarray) -> np.ndarray:
@@ -314,93 +416,68 @@ def _greedy_survivors(a: np.ndarray, b: np.ndarray, alive: np.ndarray) -> np.nda
     state = np.where(alive, 0, -1).astype(np.int8)  # 0 undecided, 1 survives, -1 removed / absent
     while True:
         undecided_b = state[b] == 0
-        a_r, b_r = a[undecided_b], b[undecided_b]
-        if not len(b_r):
+        a, b = a[undecided_b], b[undecided_b]
+        if not len(b):
             state[state == 0] = 1
             return state == 1
-        killed = np.zeros(len(state), bool)
-        killed[b_r[state[a_r] == 1]] = True
-        blocked = np.zeros(len(state), bool)
-        blocked[b_r[state[a_r] == 0]] = True
+        threat = np.zeros(len(state), np.int8)  # per unit, 1 + the best state among its removers
+        np.maximum.at(threat, b, state[a] + 1)
         undecided = state == 0
-        state[undecided & killed] = -1
-        state[undecided & ~killed & ~blocked] = 1
-        a, b = a_r, b_r
+        state[undecided & (threat == 2)] = -1  # a remover survives
+        state[undecided & (threat == 0)] = 1  # all removers are removed
 
 
-def _local_affine(mesh: _Mesh, src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Affine map image -> other image around each mesh vertex, fitted on its closed neighbourhood.
+def _local_affine(mesh: _Mesh, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Affine map image -> other image around each kept vertex, fitted on its closed neighbourhood.
 
     Ridge-regularised toward the global affine fit so that degenerate neighbourhoods stay defined.
 
     Args:
-        src, dst: (n, 2) positions of each mesh vertex and of its representative match in the other image.
+        dst: (n, 2) position in the other image of each kept vertex's representative match.
 
     Returns:
-        A (n, 2, 2), c (n, 2): dst ~ c + A (x - src[v]) near vertex v.
+        A (n, 2, 2), c (n, 2): dst ~ c + A (x - src[v]) near vertex v at src[v].
     """
-    n = len(src)
+    n = len(dst)
+    src = mesh.tri.points[:n]
     glob = np.linalg.lstsq(np.column_stack([src - src.mean(0), np.ones(n)]), dst, rcond=None)[0]
-    v = np.concatenate([mesh.edges[:, 0], mesh.edges[:, 1], np.arange(n)])
-    w = np.concatenate([mesh.edges[:, 1], mesh.edges[:, 0], np.arange(n)])
-    f = np.column_stack([src[w] - src[v], np.ones(len(v))])  # (E, 3)
-    terms = np.concatenate([(f[:, :, None] * f[:, None, :]).reshape(-1, 9),
-                            (f[:, :, None] * dst[w][:, None, :]).reshape(-1, 6)], 1)  # (E, 15)
-    order = np.argsort(v, kind="stable")
-    count = np.bincount(v, minlength=n)  # >= 1: every vertex is in its own neighbourhood
-    sums = np.add.reduceat(terms[order], np.cumsum(count) - count)
-    mat, rhs = sums[:, :9].reshape(n, 3, 3), sums[:, 9:].reshape(n, 3, 2)
-    ridge = 1.0  # px^2: negligible against real neighbourhoods, decisive for degenerate ones
-    mat[:, [0, 1], [0, 1]] += ridge
-    rhs[:, :2, :] += ridge * glob[:2][None]
+    w, f, first, mat = mesh.neighbourhoods
+    rhs = np.add.reduceat((f[:, :, None] * dst[w][:, None, :]).reshape(-1, 6), first).reshape(n, 3, 2)
+    rhs[:, :2, :] += _RIDGE * glob[:2][None]
     sol = np.linalg.solve(mat, rhs)
     return np.transpose(sol[:, :2, :], (0, 2, 1)), sol[:, 2, :]
 
 
-def _transfer_ok(mesh: _Mesh, vertex_xy_src: np.ndarray, rep_dst: np.ndarray, q_src: np.ndarray,
-                 q_dst: np.ndarray, tol: float) -> np.ndarray:
+def _transfer_ok(mesh: _Mesh, dst_v: np.ndarray, q_src: np.ndarray, q_dst: np.ndarray,
+                 tol: float) -> np.ndarray:
     """Whether q_dst lies in the image of the triangle that contains q_src.
 
+    The triangle's image must have the same (positive) orientation; each side may miss q_dst by ``tol`` px.
+
     Args:
-        vertex_xy_src: (V, 2) vertex positions in this image; rep_dst: (V, 2) position in the other image of
-            each vertex's representative kept match.
-        q_src, q_dst: (P, 2) the tested units in this and the other image.
+        dst_v: (n >= 1, 2) position in the other image of each kept vertex's representative match.
+        q_src, q_dst: (P, 2) integer positions of the tested units in this and the other image.
 
     Returns:
         (P,) bool.
     """
     tri, n = mesh.tri, len(mesh.vertex)
-    if len(q_src) == 0 or n == 0:
-        return np.zeros(len(q_src), bool)
-    src_v = vertex_xy_src[mesh.vertex].astype(np.float64)
-    dst_v = rep_dst[mesh.vertex]
-    _, nearest = cKDTree(src_v).query(q_src)
+    nearest = mesh.tree.query(q_src)[1]
     simplex = _locate(tri, q_src, nearest)
-    found = simplex >= 0
-    corners = tri.simplices[np.maximum(simplex, 0)]  # (P, 3)
-    src_tri = tri.points[corners]
-    dst_tri = np.empty_like(src_tri)
-    is_vertex = corners < n
-    dst_tri[is_vertex] = dst_v[corners[is_vertex]]
-    if not is_vertex.all():
-        affine, offset = _local_affine(mesh, src_v, dst_v)
-        nearest = np.broadcast_to(nearest[:, None], corners.shape)[~is_vertex]
-        rel = src_tri[~is_vertex] - src_v[nearest]
-        dst_tri[~is_vertex] = offset[nearest] + np.einsum("kij,kj->ki", affine[nearest], rel)
-    sign_src = np.sign(_cross(src_tri[:, 1] - src_tri[:, 0], src_tri[:, 2] - src_tri[:, 0]))
-    sign_dst = np.sign(_cross(dst_tri[:, 1] - dst_tri[:, 0], dst_tri[:, 2] - dst_tri[:, 0]))
-    ok = found & (sign_src != 0) & (sign_src == sign_dst)
-    for k in range(3):
-        p, r = dst_tri[:, k], dst_tri[:, (k + 1) % 3]
-        edge = r - p
-        length = np.hypot(edge[:, 0], edge[:, 1])
-        side = sign_dst * _cross(edge, q_dst - p)
-        ok &= (length > 0) & (side >= -tol * length)
-    return ok
-
-
-def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
+    corners = tri.simplices[simplex]  # (P, 3), of the last triangle where none (-1): ignored
+    dst = dst_v.take(np.minimum(corners, n - 1), 0)  # (P, 3, 2)
+    x, y = dst[..., 0], dst[..., 1]
+    border = corners >= n
+    if border.any():
+        affine, offset = mesh.local_affine(dst_v)
+        nearest = nearest[border.nonzero()[0]]
+        rel = tri.points[corners[border]] - tri.points[nearest]
+        predicted = offset[nearest] + np.einsum("kij,kj->ki", affine[nearest], rel)
+        x[border], y[border] = predicted[:, 0], predicted[:, 1]
+    ex, ey = x[:, [1, 2, 0]] - x, y[:, [1, 2, 0]] - y  # (P, 3) corner k -> corner k + 1
+    side = ex * (q_dst[:, 1:] - y) - ey * (q_dst[:, :1] - x)
+    return (tri.walk[3][simplex] & (ex[:, 0] * (y[:, 2] - y[:, 0]) > ey[:, 0] * (x[:, 2] - x[:, 0]))
+            & (side >= -tol * np.hypot(ex, ey)).all(1))
 
 
 def _vertices(xy: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -411,13 +488,18 @@ def _vertices(xy: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.nda
     return np.stack([uniq % (w + 2), uniq // (w + 2)], 1).astype(np.float64), inverse.reshape(-1)
 
 
+def _row_keys(xy: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """int64 key of integer positions inside the image."""
+    return xy[:, 1].astype(np.int64) * (size[1] + 2) + xy[:, 0].astype(np.int64)
+
+
 def _prepare_unmatched(xy: np.ndarray | None, size: tuple[int, int],
                        vertex_xy: np.ndarray) -> np.ndarray | None:
     """(U, 2) unique rounded unmatched keypoints off the candidates' vertices (V, 2), or None if none."""
     if xy is None or len(xy) == 0:
         return None
     free = _vertices(np.asarray(xy, np.float64).reshape(-1, 2), size)[0]
-    free = free[~np.isin(_row_keys(free, size), _row_keys(vertex_xy, size))]
+    free = free[~np.isin(_row_keys(free, size), _row_keys(vertex_xy, size), assume_unique=True)]
     return free if len(free) else None
 
 
@@ -475,7 +557,8 @@ class _Units:
     Attributes:
         uv: per image, (U,) vertex id of each unit; score: (U,) best score of the unit's matches;
         vxy: per image, (V, 2) vertex positions; sizes: per image (H, W); unmatched: per image (N, 2)
-        rounded unmatched keypoints or None; alive: (U,) currently kept units.
+        rounded unmatched keypoints or None; alive: (U,) currently kept units; by_vertex: per image, (U,)
+        the units sorted by vertex, then score.
     """
 
     def __init__(self, uv: tuple[np.ndarray, np.ndarray], score: np.ndarray,
@@ -486,46 +569,68 @@ class _Units:
         self.uv, self.score, self.vxy, self.sizes = uv, score, vxy, sizes
         self.unmatched, self.cfg, self.pool = unmatched, cfg, pool
         self.alive = np.ones(len(score), bool)
-        self._cache: tuple[bytes, tuple[_Mesh, _Mesh]] | None = None
+        self.by_vertex = tuple(np.lexsort((score, v)) for v in uv)
+        # one per image (the two may be built in parallel), for points within the border ring
+        self._delaunay = tuple(_Delaunay((-1, -1), (w, h)) for h, w in sizes)
+        self._cache: list[tuple[bytes, _Mesh] | None] = [None, None]
+
+    def mesh(self, s: int) -> _Mesh:
+        """Image s's mesh of the alive units' vertices; the last one is reused while they do not change."""
+        vertex = np.bincount(self.uv[s][self.alive], minlength=len(self.vxy[s])).nonzero()[0]
+        key = vertex.tobytes()
+        cached = self._cache[s]
+        if cached is None or cached[0] != key:
+            cached = self._cache[s] = (key, _triangulate(vertex, self.vxy[s], self.sizes[s], self.unmatched[s],
+                                                         self.cfg, self._delaunay[s]))
+        return cached[1]
 
     def meshes(self) -> tuple[_Mesh, _Mesh]:
-        """Both images' meshes of the alive units, in two threads for large inputs (OpenCV releases the
-        GIL); the last pair is reused while the alive set does not change."""
-        key = np.packbits(self.alive).tobytes()
-        if self._cache is None or self._cache[0] != key:
-            alive = self.alive.copy()
-            def build(s: int) -> _Mesh:
-                return _triangulate(np.unique(self.uv[s][alive]), self.vxy[s], self.sizes[s],
-                                    self.unmatched[s], self.cfg)
-            built = tuple(self.pool.map(build, (0, 1)) if self.pool is not None else map(build, (0, 1)))
-            self._cache = (key, built)
-        return self._cache[1]
+        """Both images' meshes, built in two threads for large inputs (OpenCV releases the GIL)."""
+        if self.pool is not None:
+            return tuple(self.pool.map(self.mesh, (0, 1)))
+        return self.mesh(0), self.mesh(1)
+
+    def grouped(self, s: int) -> np.ndarray:
+        """(A,) the alive units sorted by vertex in image s, then score."""
+        return self.by_vertex[s][self.alive[self.by_vertex[s]]]
 
     def contract(self) -> tuple[np.ndarray, int]:
-        """Stage 1. Returns (U,) removal iteration (-1 never) and the number of removing iterations."""
+        """Stage 1. Returns (U,) removal iteration (-1 never) and the number of removing iterations.
+
+        Each image's near pairs are classified in the other image: consistent when near there too (found
+        from image 0's), inconsistent when more than two edges apart there.
+        """
         n_units = len(self.score)
         removed_at = np.full(n_units, -1, np.int64)
         iteration = 0
         while iteration < self.cfg.max_iterations and self.alive.any():
             mesh = self.meshes()
-            near0, near1 = (_near_pairs(self.uv[s], self.alive, mesh[s], n_units) for s in (0, 1))
-            consistent = np.intersect1d(near0, near1, assume_unique=True)
-            only0 = np.setdiff1d(near0, near1, assume_unique=True)
-            only1 = np.setdiff1d(near1, near0, assume_unique=True)
-            inconsistent = np.sort(np.concatenate([
-                only0[~_within_two(mesh[1], self.uv[1], only0 // n_units, only0 % n_units)],
-                only1[~_within_two(mesh[0], self.uv[0], only1 // n_units, only1 % n_units)]]))
-            n_consistent = np.bincount(consistent // n_units, minlength=n_units)
-            rank = np.empty(n_units, np.int64)
-            rank[np.lexsort((self.score, -n_consistent))] = np.arange(n_units)
-            a, b = inconsistent // n_units, inconsistent % n_units
-            better = rank[a] < rank[b]
-            survive = _greedy_survivors(a[better], b[better], self.alive)
-            ca, cb = consistent // n_units, consistent % n_units
+            point = [mesh[s].local[self.uv[s]] for s in (0, 1)]  # (U,) mesh point of each alive unit
+            inconsistent, consistent = [], None
+            for s in (0, 1):
+                grouped = self.grouped(s)
+                a, b = _near_pairs(grouped, np.bincount(point[s][grouped], minlength=len(mesh[s].vertex)),
+                                   mesh[s])
+                near, far = _classify(mesh[1 - s], point[1 - s][a], point[1 - s][b])
+                inconsistent.append((a[far], b[far]))
+                if s == 0:
+                    consistent = a[near], b[near]
+            (a0, b0), (a1, b1) = inconsistent
+            a, b = np.concatenate([a0, a1]), np.concatenate([b0, b1])
+            ca, cb = consistent
+            n_consistent = np.bincount(np.concatenate([ca, cb]), minlength=n_units)
+            units = self.alive.nonzero()[0]
+            rank = np.empty(n_units, np.int64)  # among the alive units
+            rank[units[np.lexsort((self.score[units], -n_consistent[units]))]] = np.arange(len(units))
+            swap = rank[b] < rank[a]
+            survive = _greedy_survivors(np.where(swap, b, a), np.where(swap, a, b), self.alive)
+            both = survive[ca] & survive[cb]
             supported = np.zeros(n_units, bool)
-            supported[ca[survive[ca] & survive[cb]]] = True
+            supported[ca[both]] = True
+            supported[cb[both]] = True
             removed = self.alive & ~(survive & supported)
-            if not removed.any() or removed.sum() < self.cfg.settle_fraction * self.alive.sum():
+            n_removed = np.count_nonzero(removed)
+            if not n_removed or n_removed < self.cfg.settle_fraction * len(units):
                 break
             removed_at[removed] = iteration
             self.alive &= ~removed
@@ -534,33 +639,41 @@ class _Units:
 
     def expand(self, removed_at: np.ndarray, iterations: int) -> np.ndarray:
         """Stage 2, from the last removal iteration to the first: a unit removed at or after it returns
-        when both images' kept triangulations predict its position. Returns (U,) restored flags."""
+        when both images' kept triangulations predict its position. Returns (U,) restored flags.
+
+        A unit rejected by the current kept set is not tested again until that set grows.
+        """
         restored = np.zeros(len(self.score), bool)
+        if not self.alive.any():
+            return restored
+        rejected = np.zeros(len(self.score), bool)
         for it in range(iterations - 1, -1, -1):
-            cand = np.flatnonzero((removed_at >= it) & ~self.alive)
-            if not self.alive.any() or not len(cand):
+            cand = ((removed_at >= it) & ~self.alive & ~rejected).nonzero()[0]
+            if not len(cand):
                 continue
-            mesh = self.meshes()
-            ok = np.ones(len(cand), bool)
-            for s in (0, 1):
-                o = 1 - s
-                rep = _representatives(self.uv[s], self.score, self.alive, len(self.vxy[s]))
-                rep_dst = np.zeros_like(self.vxy[s])
-                has = rep >= 0
-                rep_dst[has] = self.vxy[o][self.uv[o][rep[has]]]
-                ok &= _transfer_ok(mesh[s], self.vxy[s], rep_dst, self.vxy[s][self.uv[s][cand]],
-                                   self.vxy[o][self.uv[o][cand]], self.cfg.inside_tolerance)
-            restored[cand[ok]] = True
-            self.alive[cand[ok]] = True
+            back = cand[self._predicted(cand)]
+            rejected[cand] = True
+            if len(back):
+                restored[back] = True
+                self.alive[back] = True
+                rejected[:] = False
         return restored
 
-
-def _representatives(v_this: np.ndarray, uscore: np.ndarray, alive: np.ndarray,
-                     n_vertices: int) -> np.ndarray:
-    """(V,) best-scored alive unit on each vertex of this image, -1 where none."""
-    units = np.flatnonzero(alive)
-    order = units[np.lexsort((uscore[units], v_this[units]))]
-    first = np.append(True, v_this[order][1:] != v_this[order][:-1])
-    rep = np.full(n_vertices, -1, np.int64)
-    rep[v_this[order[first]]] = order[first]
-    return rep
+    def _predicted(self, cand: np.ndarray) -> np.ndarray:
+        """(C,) whether both images' kept triangulations predict the position of the units cand (C,)."""
+        if self.pool is not None:
+            self.meshes()
+        ok = np.arange(len(cand))
+        for s in (0, 1):  # image 1 only tests the units image 0 accepts
+            o = 1 - s
+            grouped = self.grouped(s)
+            v = self.uv[s][grouped]
+            rep = grouped[np.append(True, v[1:] != v[:-1])]  # best-scored alive unit on each kept vertex
+            unit = cand[ok]
+            ok = ok[_transfer_ok(self.mesh(s), self.vxy[o][self.uv[o][rep]], self.vxy[s][self.uv[s][unit]],
+                                 self.vxy[o][self.uv[o][unit]], self.cfg.inside_tolerance)]
+            if not len(ok):
+                break
+        out = np.zeros(len(cand), bool)
+        out[ok] = True
+        return out

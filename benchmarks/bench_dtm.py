@@ -1,0 +1,126 @@
+"""DTM speed on recorded real calls, with a check that the outputs equal the recorded ones.
+
+    python benchmarks/bench_dtm.py [CALLS] [--out results/bench_dtm.json] [--repeat 1] [--every 1]
+                                   [--baseline GIT_REV]
+
+CALLS (default /tmp/dtm_calls_slime.pkl) is a pickled list of dicts, one per ``dtm_filter`` call: its
+arguments xy0, xy1, scores, size0, size1, unmatched0, unmatched1 (default config) and the recorded outputs
+keep, removed_at, restored. ``--every N`` takes every N-th call. A round runs all calls once, in this
+process, on one thread; the reported times are the smallest over ``--repeat`` rounds: wall-clock seconds
+and this process's CPU seconds (less sensitive to other processes on a busy machine). ``--baseline REV``
+also times the ``dtm.py`` of that git revision, its rounds alternating with the current code's, so both
+see the same machine load. The JSON also has ms per call, whether every output equals the recorded one,
+and the 1-minute load average before and after.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import pickle
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+from types import ModuleType
+
+import cv2
+import numpy as np
+
+from slime_match.matching import dtm
+
+ROOT = Path(__file__).resolve().parents[1]
+DTM_PATH = "src/slime_match/matching/dtm.py"
+
+
+def load_baseline(rev: str, folder: Path) -> ModuleType:
+    """The dtm module of a git revision, importable next to the current one (same package, other name)."""
+    path = folder / "dtm_baseline.py"
+    path.write_text(subprocess.run(["git", "show", f"{rev}:{DTM_PATH}"], cwd=ROOT, check=True,
+                                   capture_output=True, text=True).stdout)
+    spec = importlib.util.spec_from_file_location("slime_match.matching._dtm_baseline", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up by name
+    spec.loader.exec_module(module)
+    return module
+
+
+def run_round(module: ModuleType, calls: list[dict]) -> tuple[float, float, bool]:
+    """Wall-clock and CPU seconds for all calls, and whether every output equals the recorded one."""
+    equal = True
+    wall = cpu = 0.0
+    for c in calls:
+        start_wall, start_cpu = time.perf_counter(), time.process_time()
+        res = module.dtm_filter(c["xy0"], c["xy1"], c["scores"], c["size0"], c["size1"], c["unmatched0"],
+                                c["unmatched1"])
+        wall += time.perf_counter() - start_wall
+        cpu += time.process_time() - start_cpu
+        equal &= (np.array_equal(res.keep, c["keep"]) and np.array_equal(res.removed_at, c["removed_at"])
+                  and np.array_equal(res.restored, c["restored"]))
+    return wall, cpu, bool(equal)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("calls", nargs="?", default="/tmp/dtm_calls_slime.pkl")
+    parser.add_argument("--out", type=Path)
+    parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--every", type=int, default=1)
+    parser.add_argument("--baseline", help="git revision whose dtm.py is timed too")
+    args = parser.parse_args()
+
+    with open(args.calls, "rb") as f:
+        calls = pickle.load(f)[:: args.every]
+    with tempfile.TemporaryDirectory() as folder:
+        variants = {"current": dtm}
+        if args.baseline:
+            variants["baseline"] = load_baseline(args.baseline, Path(folder))
+        load_before = os.getloadavg()[0]
+        rounds: dict[str, list[tuple[float, float]]] = {name: [] for name in variants}
+        equal = dict.fromkeys(variants, True)
+        for _ in range(args.repeat):
+            for name, module in variants.items():
+                wall, cpu, same = run_round(module, calls)
+                rounds[name].append((wall, cpu))
+                equal[name] &= same
+        load_after = os.getloadavg()[0]
+
+    report: dict = {
+        "date": datetime.now(UTC).isoformat(timespec="seconds"),
+        "calls_file": str(args.calls),
+        "calls": len(calls),
+        "repeat": args.repeat,
+        "load_average_1min": {"before": load_before, "after": load_after},
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "opencv": cv2.__version__,
+    }
+    for name in variants:
+        wall = min(w for w, _ in rounds[name])
+        cpu = min(c for _, c in rounds[name])
+        report[name] = {"total_s": round(wall, 4), "ms_per_call": round(1000 * wall / len(calls), 3),
+                        "cpu_s": round(cpu, 4), "rounds_s": [round(w, 4) for w, _ in rounds[name]],
+                        "outputs_equal_recorded": equal[name]}
+        print(f"{name:9s} {wall:8.3f} s  {1000 * wall / len(calls):7.2f} ms/call  cpu {cpu:8.3f} s  "
+              f"outputs equal: {equal[name]}")
+    if args.baseline:
+        report["baseline"]["revision"] = args.baseline
+        report["speedup"] = round(report["baseline"]["total_s"] / report["current"]["total_s"], 2)
+        report["speedup_cpu"] = round(report["baseline"]["cpu_s"] / report["current"]["cpu_s"], 2)
+        print(f"speed-up  {report['speedup']:.2f}x wall, {report['speedup_cpu']:.2f}x cpu")
+    print(f"load average (1 min) {load_before:.2f} -> {load_after:.2f}")
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(report, indent=2) + "\n")
+    if not all(equal.values()):
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()
