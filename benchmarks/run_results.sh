@@ -7,7 +7,7 @@
 #
 # Slow on a CPU (Slime and Key.Net take tens of seconds per pair); resumable: predictions are cached in
 # $OUT/predictions, so an interrupted run continues where it stopped and a rerun only recomputes metrics.
-# Environment: OUT (results folder, default results/full), DESCRIPTOR (Hz+/Slime descriptor: tfeat where
+# Environment: OUT (results folder, default results/full), DESCRIPTOR (Hz+/Slime/Key.Net descriptor: tfeat where
 # HardNet's weights are absent, as on the project machines; auto elsewhere), METHODS (';'-separated method
 # specs, default: the whole registry), TORCH_HOME (kornia weights).
 set -euo pipefail
@@ -18,7 +18,7 @@ fi
 OUT="${OUT:-results/full}"
 [[ -n "${METHODS:-}" ]] && METHODS_NOTE=", METHODS=$METHODS"
 D="${DESCRIPTOR:-tfeat}"
-ALL="rootsift;rootsift-upright;slime-rootsift;keynet;keynet-upright;hz+:descriptor=$D;hz+-upright:descriptor=$D"
+ALL="rootsift;rootsift-upright;slime-rootsift;keynet:descriptor=$D;keynet-upright:descriptor=$D;hz+:descriptor=$D;hz+-upright:descriptor=$D"
 METHODS="${METHODS:-$ALL;slime:descriptor=$D;slime-upright:descriptor=$D;opencv-sift}"
 CMD=(python -m slime_match.eval.bench graf hpatches scannet-sample motorcycle --rotations 90,180,270
      --thresholds none,5,3,2,1 --seed 0 --methods "$METHODS" -o "$OUT" "$@")
