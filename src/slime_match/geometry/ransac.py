@@ -28,6 +28,8 @@ from slime_match.types import GeometryResult
 
 logger = logging.getLogger("slime_match")
 
+_CACHE_ELEMENTS = 1 << 16  # models x points scored per step by the batched homography RANSAC (cache-sized)
+
 
 @dataclass
 class HomographyRansacConfig:
@@ -119,10 +121,28 @@ def _iteration_bound(inliers: np.ndarray, n: np.ndarray, sample_size: int, cfg: 
     return np.clip(np.ceil(bound), cfg.min_iterations, cfg.max_iterations).astype(np.int64)
 
 
+def _pair_gap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(...) distance between correspondences a and b (..., 4) = (x0, y0, x1, y1): the smaller of both images."""
+    d = a - b
+    d *= d
+    return np.sqrt(np.minimum(d[..., 0] + d[..., 1], d[..., 2] + d[..., 3]))
+
+
 def _min_pair_distance(x: np.ndarray) -> np.ndarray:
-    """(M,) smallest distance between two points of each (M, k, 2) sample."""
+    """(M,) smallest distance between two correspondences of each (M, k, 4) sample, in either image."""
     i, j = np.triu_indices(x.shape[1], 1)
-    return np.linalg.norm(x[:, i] - x[:, j], axis=-1).min(axis=1)
+    return _pair_gap(x[:, i], x[:, j]).min(axis=1)
+
+
+def _has_far_quadruple(x: np.ndarray, t: float) -> bool:
+    """Whether some 4 of the (n, 4) correspondences pass the sample distance test (``_min_pair_distance > t``).
+
+    Such a sample is a 4-clique of the graph joining the pairs farther than t apart: an edge (i, j) whose
+    common neighbours hold an edge. Memory and time grow as n^3 and n^4: meant for small n.
+    """
+    far = (_pair_gap(x[:, None], x[None]) > t).astype(np.float64)  # (n, n), zero diagonal
+    common = far[:, None, :] * far[None, :, :]  # (n, n, n): k joined to both i and j
+    return bool((((common @ far) * common).sum(axis=2) * far).any())
 
 
 def _consistent_side(h: np.ndarray, xs: np.ndarray) -> np.ndarray:
@@ -141,17 +161,20 @@ def _homography_inlier_mask(
     roots: ``|x1 - p / w| < t`` iff ``|x1 w - p|^2 < t^2 w^2`` for ``p, w = H [x0; 1]``.
 
     Args:
-        h: (B, 3, 3) homographies; side: (B,) +1/-1; x0, x1: (B, K, 2) or (K, 2) pixels; t: pixels.
+        h: (B, 3, 3) homographies; side: (B,) +1/-1; t: pixels.
+        x0, x1: (2, B, K) or (2, K) pixel coordinates, the x row then the y row (contiguous rows are fastest).
     """
-    x0 = np.broadcast_to(x0, (h.shape[0],) + x0.shape[-2:])
-    x1 = np.broadcast_to(x1, (h.shape[0],) + x1.shape[-2:])
     t2 = t * t
     ok = None
-    for m, a, b in ((h, x0, x1), (_inverse(h), x1, x0)):
-        mm = m[:, :, :, None]
-        p = mm[:, :, 0] * a[:, None, :, 0] + mm[:, :, 1] * a[:, None, :, 1] + mm[:, :, 2]  # (B, 3, K)
-        w = p[:, 2]
-        close = (b[..., 0] * w - p[:, 0]) ** 2 + (b[..., 1] * w - p[:, 1]) ** 2 < t2 * w * w
+    for m, (ax, ay), (bx, by) in ((h, x0, x1), (_inverse(h), x1, x0)):
+        mm = m[:, :, :, None]  # (B, 3, 3, 1)
+        px, py, w = (mm[:, r, 0] * ax + mm[:, r, 1] * ay + mm[:, r, 2] for r in range(3))  # (B, K) each
+        ex = bx * w - px
+        ey = by * w - py
+        ex *= ex
+        ey *= ey
+        ex += ey
+        close = ex < t2 * w * w
         ok = close & (w * side[:, None] > 0) if ok is None else ok & close & (w != 0)
     return ok
 
@@ -163,19 +186,21 @@ def _count_homography_inliers(
     counts = np.zeros(len(h), dtype=np.int64)
     order = np.argsort(data.n[own], kind="stable")  # similar sizes together: little padding
     sizes = data.n[own[order]]
+    limit = min(max_elements, _CACHE_ELEMENTS)
     start = 0
-    while start < len(order):  # chunks of models whose padded block stays under max_elements
+    while start < len(order):  # chunks of models whose padded block stays under the limit
         padded = np.arange(1, len(order) - start + 1) * np.maximum(sizes[start:], 1)
-        stop = start + max(1, int(np.searchsorted(padded, max_elements, side="right")))
+        stop = start + max(1, int(np.searchsorted(padded, limit, side="right")))
         m = order[start:stop]
         start = stop
-        x0, x1, valid = data.gather(own[m])
-        counts[m] = (_homography_inlier_mask(h[m], side[m], x0, x1, threshold) & valid).sum(axis=1)
+        xy, valid = data.gather(own[m])
+        counts[m] = (_homography_inlier_mask(h[m], side[m], xy[:2], xy[2:], threshold) & valid).sum(axis=1)
     return counts
 
 
 def _homography_inliers(h: np.ndarray, side: float, x0: np.ndarray, x1: np.ndarray, t: float) -> np.ndarray:
-    return _homography_inlier_mask(h[None], np.array([side]), x0, x1, t)[0]
+    """(K,) inliers of one homography on (K, 2) correspondences."""
+    return _homography_inlier_mask(h[None], np.array([side]), x0.T, x1.T, t)[0]
 
 
 class _Stack:
@@ -193,21 +218,29 @@ class _Stack:
         self.x0s, self.x1s = xs0, xs1
         self.n = np.array([len(a) for a in xs0], dtype=np.int64)
         self.offset = np.concatenate([[0], np.cumsum(self.n)[:-1]]).astype(np.int64)
-        self.x0 = np.concatenate(xs0 + [np.zeros((1, 2))])  # trailing pad row
-        self.x1 = np.concatenate(xs1 + [np.zeros((1, 2))])
+        pad = [np.zeros((1, 2))]  # trailing pad row
+        self.rows = np.hstack([np.concatenate(xs0 + pad), np.concatenate(xs1 + pad)])  # (N + 1, 4): x0 y0 x1 y1
+        self.cols = np.ascontiguousarray(self.rows.T)  # (4, N + 1)
 
-    def take(self, own: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(M, k, 2) points at local indices idx (M, k) of problems own (M,)."""
-        g = self.offset[own, None] + idx
-        return self.x0[g], self.x1[g]
+    def without_far_sample(self, t: float, candidates: np.ndarray, max_n: int = 64) -> np.ndarray:
+        """(P,) True for the candidate problems (4 <= n <= max_n) proven to hold no 4 correspondences pairwise
+        farther than t: every sample of theirs fails the distance test."""
+        check = np.flatnonzero(candidates & (self.n >= 4) & (self.n <= max_n))
+        out = np.zeros(len(self.n), dtype=bool)
+        out[check] = [not _has_far_quadruple(self.rows[self.offset[p]:self.offset[p] + self.n[p]], t) for p in check]
+        return out
 
-    def gather(self, own: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """All points of problems own (M,), padded: (M, K, 2), (M, K, 2), (M, K) validity mask."""
+    def take(self, own: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """(M, k, 4) points (x0, y0, x1, y1) at local indices idx (M, k) of problems own (M,)."""
+        return self.rows[self.offset[own, None] + idx]
+
+    def gather(self, own: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """All points of problems own (M,), padded: (4, M, K) coordinate rows x0, y0, x1, y1 and (M, K) validity."""
         k = int(self.n[own].max(initial=0))
         local = np.arange(k)
         valid = local[None] < self.n[own, None]
-        g = np.where(valid, self.offset[own, None] + local[None], len(self.x0) - 1)
-        return self.x0[g], self.x1[g], valid
+        g = np.where(valid, self.offset[own, None] + local[None], self.cols.shape[1] - 1)
+        return self.cols[:, g], valid
 
 
 def _finish_homography(
@@ -242,7 +275,10 @@ def ransac_homography_many(
 
     Each round draws up to ``config.batch`` 4-point samples for every unfinished problem, fits them
     all with one batched DLT and scores them together, so hundreds of small problems cost about as
-    much as a few large ones.
+    much as a few large ones. Small problems without any 4 correspondences pairwise farther apart than
+    ``min_sample_distance`` (checked exactly after the first round) skip the work on their samples, which
+    would all be rejected: their samples are still drawn while other problems run (same random stream,
+    same results) and the loop ends once only they are left.
 
     Args:
         problems: list of (x0 (K_i, 2), x1 (K_i, 2)) pixel correspondences.
@@ -264,15 +300,22 @@ def ransac_homography_many(
     best_side = np.zeros(num)
     iters = np.zeros(num, dtype=np.int64)
     bound = np.full(num, cfg.max_iterations, dtype=np.int64)
+    hopeless = np.zeros(num, dtype=bool)  # problems that only draw rejected samples (known after one round)
     active = data.n >= 4
-    while active.any():
+    while (active & ~hopeless).any():
+        first_round = not iters.any()
         act = np.flatnonzero(active)
         cnt = np.minimum(np.maximum(cfg.min_iterations, bound[act]) - iters[act], cfg.batch)
         iters[act] += cnt
         own = np.repeat(act, cnt)
-        s0, s1 = data.take(own, sample_subsets_varying(rng, data.n[own], 4))
-        ok = np.minimum(_min_pair_distance(s0), _min_pair_distance(s1)) > cfg.min_sample_distance
-        own, s0, s1 = own[ok], s0[ok], s1[ok]
+        index = sample_subsets_varying(rng, data.n[own], 4)  # drawn for all: the random stream is kept
+        drawn = ~hopeless[own]
+        own = own[drawn]
+        s = data.take(own, index[drawn])
+        ok = _min_pair_distance(s) > cfg.min_sample_distance
+        if first_round:  # the small problems none of whose samples passed: is any sample possible at all?
+            hopeless = data.without_far_sample(cfg.min_sample_distance, np.bincount(own[ok], minlength=num) == 0)
+        own, s0, s1 = own[ok], s[ok, :, :2], s[ok, :, 2:]
         if len(own):
             h, sigma2 = homography_dlt_batch(s0, s1)
             side = _consistent_side(h, s0)
@@ -289,6 +332,7 @@ def ransac_homography_many(
             best_count[p], best_h[p], best_side[p] = counts[top], h[top], side[top]
             bound[p] = _iteration_bound(best_count[p], data.n[p], 4, cfg)
         active = (data.n >= 4) & (iters < np.maximum(cfg.min_iterations, bound))
+    iters[active] = cfg.max_iterations  # the hopeless problems left: they would only draw rejected samples
     results = []
     for i in range(num):  # per-problem least-squares refit: a loop over problems, not points
         info = {"backend": "slime", "iterations": int(iters[i]), "threshold": cfg.threshold}
@@ -339,7 +383,7 @@ def _homography_counts(
     chunk = max(1, max_elements // max(len(x0), 1))
     out = []
     for s in range(0, len(h), chunk):
-        out.append(_homography_inlier_mask(h[s : s + chunk], side[s : s + chunk], x0, x1, t).sum(axis=1))
+        out.append(_homography_inlier_mask(h[s : s + chunk], side[s : s + chunk], x0.T, x1.T, t).sum(axis=1))
     return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
 
 
