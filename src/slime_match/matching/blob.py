@@ -49,12 +49,8 @@ class BlobConfig:
 
 
 def greedy_many_to_many(rows: np.ndarray, cols: np.ndarray, values: np.ndarray, max_per: int) -> np.ndarray:
-    """Greedy many-to-many acceptance, vectorised.
-
-    Equivalent to walking the pairs by ascending value and accepting (i, j) while row i and column j each
-    hold fewer than ``max_per`` accepted pairs. Resolved in rounds: a pair is accepted once even all
-    undecided earlier pairs of its row and column could not fill them, rejected once accepted earlier
-    pairs already do; the earliest undecided pair is always decidable, so the loop ends.
+    """Greedy many-to-many acceptance: walk the pairs by ascending value (stable) and accept (i, j) while row i
+    and column j each hold fewer than ``max_per`` accepted pairs.
 
     Args:
         rows, cols: (P,) int pair indices (no duplicate pairs); values: (P,) sort keys.
@@ -63,36 +59,18 @@ def greedy_many_to_many(rows: np.ndarray, cols: np.ndarray, values: np.ndarray, 
     Returns:
         (P,) bool accepted mask.
     """
-    p = len(values)
     order = np.argsort(values, kind="stable")
-    rank = np.empty(p, np.int64)
-    rank[order] = np.arange(p)
-    groupings = []
-    for key in (rows, cols):
-        perm = np.lexsort((rank, key))
-        k = key[perm]
-        start = np.r_[True, k[1:] != k[:-1]]
-        groupings.append((perm, np.maximum.accumulate(np.where(start, np.arange(p), 0))))
-    accepted = np.zeros(p, bool)
-    undecided = np.ones(p, bool)
-    while undecided.any():
-        can_accept = undecided.copy()
-        must_reject = np.zeros(p, bool)
-        for perm, first in groupings:
-            acc_before = _exclusive_group_cumsum(accepted[perm], first)
-            any_before = _exclusive_group_cumsum((accepted | undecided)[perm], first)
-            can_accept[perm] &= any_before < max_per
-            must_reject[perm] |= acc_before >= max_per
-        must_reject &= undecided
-        accepted |= can_accept
-        undecided &= ~(can_accept | must_reject)
+    row_left = [max_per] * (int(rows.max(initial=-1)) + 1)
+    col_left = [max_per] * (int(cols.max(initial=-1)) + 1)
+    keep = []
+    for k, i, j in zip(order.tolist(), rows[order].tolist(), cols[order].tolist()):  # a few thousand pairs
+        if row_left[i] and col_left[j]:
+            row_left[i] -= 1
+            col_left[j] -= 1
+            keep.append(k)
+    accepted = np.zeros(len(values), bool)
+    accepted[keep] = True
     return accepted
-
-
-def _exclusive_group_cumsum(flags: np.ndarray, first: np.ndarray) -> np.ndarray:
-    """Count of set flags before each position within its group (``first``: index of the group start)."""
-    c = np.cumsum(flags, dtype=np.int64) - flags
-    return c - c[first]
 
 
 def blob_match(desc0: torch.Tensor, desc1: torch.Tensor, xy0: torch.Tensor, xy1: torch.Tensor,

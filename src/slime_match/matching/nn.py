@@ -20,6 +20,39 @@ def _sq_dist_block(a: torch.Tensor, b: torch.Tensor, b_sq: torch.Tensor) -> torc
     return torch.addmm(b_sq[None, :], a, b.T, alpha=-2.0).add_((a * a).sum(1, keepdim=True))
 
 
+def _smallest(d: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The k <= M smallest entries of each row of a (B, M) matrix, ascending: values (B, k) and indices (B, k).
+
+    On CPU (3-5x faster than ``torch.topk`` on Slime's matrices of a few hundred squared; equal values go to
+    the lowest index): the k-th smallest of 8k column-group minima bounds the row's k-th smallest from above
+    and only the few entries under the bound are sorted. Elsewhere ``torch.topk``.
+    """
+    if d.device.type != "cpu":
+        return torch.topk(d, k, dim=1, largest=False, sorted=True)
+    a = np.ascontiguousarray(d.detach().numpy())
+    rows, m = a.shape
+    if k == 0 or rows == 0:
+        return torch.empty(rows, k, dtype=d.dtype), torch.empty(rows, k, dtype=torch.long)
+    groups = 8 * k
+    if groups < m:
+        low = a[:, :groups].copy()  # (B, groups) minima of the columns equal mod groups
+        for start in range(groups, m, groups):
+            w = min(groups, m - start)
+            np.minimum(low[:, :w], a[:, start:start + w], out=low[:, :w])
+        flat = np.flatnonzero(a <= np.partition(low, k - 1, axis=1)[:, k - 1:k])  # >= k entries per row
+    else:
+        flat = np.arange(a.size)
+    row = flat // m
+    count = np.bincount(row, minlength=rows)
+    pos = np.arange(len(flat)) - (np.cumsum(count) - count)[row]
+    vals = np.full((rows, count.max()), np.inf, a.dtype)  # the candidates of each row, in column order
+    vals[row, pos] = a.ravel()[flat]
+    idx = np.zeros(vals.shape, np.int64)
+    idx[row, pos] = flat - row * m
+    order = np.argsort(vals, axis=1, kind="stable")[:, :k]
+    return torch.from_numpy(np.take_along_axis(vals, order, 1)), torch.from_numpy(np.take_along_axis(idx, order, 1))
+
+
 def knn(desc0: torch.Tensor, desc1: torch.Tensor, k_rows: int, k_cols: int = 0,
         block_size: int = DEFAULT_BLOCK) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """k nearest neighbours along the rows and the columns of the L2 distance matrix, in row blocks.
@@ -49,17 +82,17 @@ def knn(desc0: torch.Tensor, desc1: torch.Tensor, k_rows: int, k_cols: int = 0,
     for start in range(0, n, block_size):
         d = _sq_dist_block(a[start:start + block_size], b, b_sq)
         if kr > 0:
-            val, idx = torch.topk(d, kr, dim=1, largest=False, sorted=True)
-            row_dist[start:start + d.shape[0]] = val
-            row_idx[start:start + d.shape[0]] = idx
+            row_dist[start:start + d.shape[0]], row_idx[start:start + d.shape[0]] = _smallest(d, kr)
         if kc > 0:
-            val, idx = torch.topk(d, min(kc, d.shape[0]), dim=0, largest=False, sorted=False)
+            val, idx = _smallest(d.T, min(kc, d.shape[0]))  # (M, k) per block, merged below
             col_vals.append(val)
             col_inds.append(idx + start)
     if kc > 0:
-        col_dist, pick = torch.topk(torch.cat(col_vals), kc, dim=0, largest=False, sorted=True)
-        col_idx = torch.gather(torch.cat(col_inds), 0, pick).T.contiguous()
-        col_dist = col_dist.T.clamp_min(0.0).sqrt().contiguous()
+        col_dist, col_idx = col_vals[0], col_inds[0]
+        if len(col_vals) > 1:  # merge the blocks' lists
+            col_dist, pick = _smallest(torch.cat(col_vals, 1), kc)
+            col_idx = torch.gather(torch.cat(col_inds, 1), 1, pick)
+        col_dist = col_dist.clamp_min(0.0).sqrt()
     else:
         col_dist = torch.empty(m, 0, device=dev)
         col_idx = torch.empty(m, 0, dtype=torch.long, device=dev)
