@@ -38,8 +38,7 @@ __all__ = [
 log = logging.getLogger("slime_match")
 
 _RELATIVE_SCALE_MODES = ("patch", "homography")
-# unit steps to the 4-connected neighbours n - x, and their directions atan2(n - x)
-_STEPS = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])
+# directions atan2(n - x) of the 4-connected neighbours n = x + (1,0), (0,1), (-1,0), (0,-1)
 _STEP_ANGLES = np.array([0.0, math.pi / 2, math.pi, -math.pi / 2])
 
 
@@ -53,14 +52,15 @@ class PlaneConfig:
         t_sigma: relative scale tolerance (ratio).
         relative_scale: "patch" (compare psi^H_n with the patch ratio psi) or "homography" (the paper's
             literal equation: bound psi^H_n alone), see the module docstring.
-        chunk: number of (plane, match) pairs evaluated at once by the reprojection pre-filter.
+        chunk: number of (plane, match) pairs evaluated at once by the reprojection pre-filter (cache-sized
+            by default: 3x faster than millions at once).
     """
 
     t_perp: float = 15.0
     t_theta: float = 3.0 * math.pi / 8.0
     t_sigma: float = 3.0
     relative_scale: str = "patch"
-    chunk: int = 4_000_000
+    chunk: int = 1 << 18
 
     def __post_init__(self) -> None:
         if self.relative_scale not in _RELATIVE_SCALE_MODES:
@@ -237,24 +237,27 @@ def _candidates(
 
 
 def _project_local(h: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per-pair homography mapping of a point and of its 4-neighbourhood.
+    """Per-pair homography mapping of a point and of its 4-neighbourhood (coordinates in rows: contiguous,
+    as NumPy is slow on tiny inner dimensions).
 
     Args:
-        h: (K, 3, 3) homographies.
-        x: (K, 2) points.
+        h: (9, K) homographies, row-major entries: ``h[3 i + j] = H_ij``.
+        x: (2, K) points.
 
     Returns:
-        (K, 2) mapped points ``H x``; (K,) third homogeneous coordinate w; (K, 4) local rotations
-        ``rho^H_n = atan2(Hn - Hx) - atan2(n - x)`` (radians) and (K, 4) local scales ``psi^H_n = |Hn - Hx|``
+        (2, K) mapped points ``H x``; (K,) third homogeneous coordinate w; (4, K) local rotations
+        ``rho^H_n = atan2(Hn - Hx) - atan2(n - x)`` (radians) and (4, K) local scales ``psi^H_n = |Hn - Hx|``
         for n = x + (1,0), (0,1), (-1,0), (0,-1).
     """
-    p = np.einsum("kij,kj->ki", h[:, :, :2], x) + h[:, :, 2]  # (K, 3) homogeneous H x
-    cols = h[:, :, :2].transpose(0, 2, 1)  # (K, 2, 3): H [e; 0] for e = (1,0), (0,1)
-    pn = p[:, None] + np.concatenate([cols, -cols], axis=1)  # (K, 4, 3) neighbours, order of _STEPS
+    p = [h[3 * i] * x[0] + h[3 * i + 1] * x[1] + h[3 * i + 2] for i in range(3)]  # homogeneous H x
+    d = np.empty((2, 4, x.shape[1]))
     with np.errstate(divide="ignore", invalid="ignore"):
-        q = p[:, :2] / p[:, 2:]
-        d = pn[..., :2] / pn[..., 2:] - q[:, None]
-    return q, p[:, 2], np.arctan2(d[..., 1], d[..., 0]) - _STEP_ANGLES, np.hypot(d[..., 0], d[..., 1])
+        q = np.stack([p[0] / p[2], p[1] / p[2]])
+        for n, (j, sign) in enumerate(((0, 1.0), (1, 1.0), (0, -1.0), (1, -1.0))):  # n = x + sign e_j
+            pn = [p[i] + sign * h[3 * i + j] for i in range(3)]  # H n = H x + sign H e_j
+            d[0, n] = pn[0] / pn[2] - q[0]
+            d[1, n] = pn[1] / pn[2] - q[1]
+    return q, p[2], np.arctan2(d[1], d[0]) - _STEP_ANGLES[:, None], np.hypot(d[0], d[1])
 
 
 def expand_planes(
@@ -287,7 +290,9 @@ def expand_planes(
     if n_planes == 0 or n_matches == 0:
         return sp.csr_matrix((n_planes, n_matches), dtype=bool)
     hinv = np.linalg.inv(h)
+    h9, hinv9 = np.ascontiguousarray(h.reshape(-1, 9).T), np.ascontiguousarray(hinv.reshape(-1, 9).T)  # (9, L)
     xy0, xy1 = table.xy0.astype(np.float32), table.xy1.astype(np.float32)
+    xy0t, xy1t = np.ascontiguousarray(table.xy0.T), np.ascontiguousarray(table.xy1.T)  # (2, M)
     rho_all = table.rho
     step = max(1, config.chunk // n_matches)
     rows, cols = [], []
@@ -295,20 +300,21 @@ def expand_planes(
     for a in range(0, n_planes, step):
         pl, mi = _candidates(xy0, xy1, h[a : a + step], side[a : a + step], config.t_perp)
         pl += a
-        q0, w0, rot0, sc0 = _project_local(h[pl], table.xy0[mi])
-        q1, _, rot1, sc1 = _project_local(hinv[pl], table.xy1[mi])
-        err = np.maximum(np.hypot(*(q0 - table.xy1[mi]).T), np.hypot(*(q1 - table.xy0[mi]).T))
-        rho = rho_all[mi, None]
-        ok_rot = (np.abs(wrap_angle(rho - rot0)) < config.t_theta).any(1) | (
+        x0, x1 = xy0t[:, mi], xy1t[:, mi]
+        q0, w0, rot0, sc0 = _project_local(h9[:, pl], x0)
+        q1, _, rot1, sc1 = _project_local(hinv9[:, pl], x1)
+        err = np.maximum(np.hypot(*(q0 - x1)), np.hypot(*(q1 - x0)))
+        rho = rho_all[mi]
+        ok_rot = (np.abs(wrap_angle(rho - rot0)) < config.t_theta).any(0) | (
             np.abs(wrap_angle(-rho - rot1)) < config.t_theta
-        ).any(1)
+        ).any(0)
         if config.relative_scale == "patch":
-            psi = (table.scale1[mi] / table.scale0[mi])[:, None]
+            psi = table.scale1[mi] / table.scale0[mi]
             sc0, sc1 = sc0 / psi, sc1 * psi
         with np.errstate(invalid="ignore"):
-            ok_sc = ((sc0 >= 1.0 / config.t_sigma) & (sc0 <= config.t_sigma)).any(1) | (
+            ok_sc = ((sc0 >= 1.0 / config.t_sigma) & (sc0 <= config.t_sigma)).any(0) | (
                 (sc1 >= 1.0 / config.t_sigma) & (sc1 <= config.t_sigma)
-            ).any(1)
+            ).any(0)
         keep = (err < config.t_perp) & (np.sign(w0) == side[pl]) & ok_rot & ok_sc
         rows.append(pl[keep])
         cols.append(mi[keep])

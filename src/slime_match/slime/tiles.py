@@ -188,7 +188,14 @@ def tile_sets(table: MatchTable, planes: sp.csr_matrix, tiles0: list[Block], til
     c0 = t0.indices[t0.indptr[m] + k // n1[m]].astype(np.int64)
     c1 = t1.indices[t1.indptr[m] + k % n1[m]].astype(np.int64)
     key = (pl[e] * len(tiles0) + c0) * len(tiles1) + c1
-    uniq, set_id = np.unique(key, return_inverse=True)
+    space = planes.shape[0] * len(tiles0) * len(tiles1)
+    if space <= 8 * len(key) + (1 << 20):  # a presence table: np.unique's sorted keys and inverse, no sort
+        present = np.zeros(space, bool)
+        present[key] = True
+        uniq = np.flatnonzero(present)
+        set_id = (np.cumsum(present) - 1)[key]
+    else:
+        uniq, set_id = np.unique(key, return_inverse=True)
     mat = sp.csr_matrix((np.ones(len(m), bool), (set_id.reshape(-1), m)), shape=(len(uniq), n_matches))
     c1u = uniq % len(tiles1)
     rest = uniq // len(tiles1)
