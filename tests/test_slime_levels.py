@@ -86,8 +86,7 @@ def test_fixed_orientation_descriptors_use_the_crop_context(levels):
         dist, j = _nearest(lv.features.xy.numpy(), shared[0].features.xy.numpy()[own])
         same = np.nonzero(dist < 0.3)[0]
         assert len(same) > 0.8 * len(lv.features)
-        describe_fixed_bins(pipeline, lv, {3: same}, 16)
-        describe_fixed_bins(pipeline, shared[0], {3: own[j[same]]}, 16)
+        describe_fixed_bins(pipeline, [(lv, {3: same}), (shared[0], {3: own[j[same]]})], 16)
         ours = fixed_features(lv, same, 3, 16).descriptors
         ref = fixed_features(shared[0], own[j[same]], 3, 16).descriptors
         cosine = (ours * ref).sum(dim=1)

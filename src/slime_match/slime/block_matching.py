@@ -10,6 +10,7 @@ paper prototype's alternative: each block crop (zero-padded box) is detected and
 
 from __future__ import annotations
 
+import functools
 import itertools
 import logging
 import math
@@ -143,28 +144,40 @@ def orientation_bin(angle: float, bins: int) -> int:
     return round(angle / (2 * math.pi / bins)) % bins
 
 
-def describe_fixed_bins(pipeline: BasePipeline, level: ScaleLevel, requests: dict[int, np.ndarray],
-                        bins: int) -> None:
+def describe_fixed_bins(pipeline: BasePipeline, requests: list[tuple[ScaleLevel, dict[int, np.ndarray]]],
+                        bins: int, workers: int = 1) -> None:
     """Compute (once, cached in ``level.fixed``) the descriptors of features under fixed orientations.
 
     Args:
-        requests: orientation bin -> indices of the level's features needed under that bin's angle.
-            Each bin is described in one batched call, and only for features not already cached.
+        requests: (level, orientation bin -> indices of the level's features needed under that bin's angle),
+            each level at most once. Each (level, bin) is described in one batched call, and only for features
+            not already cached.
+        workers: forked processes sharing the calls (the same batches as in one process: same descriptors).
     """
-    n = len(level.features)
-    for bin_index, index in requests.items():
-        computed, descriptors = level.fixed.get(bin_index, (np.zeros(n, bool), None))
-        missing = np.unique(index)
-        missing = missing[~computed[missing]]
-        if len(missing) == 0:
-            continue
+    tasks = []
+    for level, wanted in requests:
+        for bin_index, index in wanted.items():
+            computed, _ = level.fixed.get(bin_index, (np.zeros(len(level.features), bool), None))
+            missing = np.unique(index)
+            missing = missing[~computed[missing]]
+            if len(missing):
+                tasks.append((level, bin_index, missing))
+    tasks.sort(key=lambda task: -len(task[2]))  # the largest first: even loads over the workers
+
+    def describe(k: int) -> np.ndarray:
+        level, bin_index, missing = tasks[k]
         regions = level.features.subset(torch.from_numpy(missing))
         if level.origin != (0.0, 0.0):
             regions = translate_features(regions, (-level.origin[0], -level.origin[1]))
         fresh = pipeline.describe_fixed(level.context, regions, bin_index * 2 * math.pi / bins)
+        return fresh.descriptors.detach().cpu().numpy()
+
+    for (level, bin_index, missing), fresh in zip(tasks, fork_map(describe, len(tasks), workers, len(tasks))):
+        n, device = len(level.features), level.features.laf.device
+        computed, descriptors = level.fixed.get(bin_index, (np.zeros(n, bool), None))
         if descriptors is None:
-            descriptors = torch.zeros(n, fresh.descriptors.shape[1], device=fresh.descriptors.device)
-        descriptors[torch.from_numpy(missing).to(descriptors.device)] = fresh.descriptors
+            descriptors = torch.zeros(n, fresh.shape[1], device=device)
+        descriptors[torch.from_numpy(missing).to(device)] = torch.from_numpy(fresh).to(device)
         computed = computed.copy()
         computed[missing] = True
         level.fixed[bin_index] = (computed, descriptors)
@@ -212,7 +225,31 @@ def to_block_frame(features: Features, block: Block) -> Features:
 
 PairFeatures = Callable[[tuple[int, int]], Features]
 
-_FORK_TASK: tuple | None = None  # set just before forking workers, read by _match_chunk in the children
+_FORK_TASK: Callable[[int], Any] | None = None  # set just before forking workers, read by _run_chunk in the children
+
+
+def _run_chunk(bounds: tuple[int, int]) -> list:
+    torch.set_num_threads(1)
+    return [_FORK_TASK(k) for k in range(*bounds)]
+
+
+def fork_map(fn: Callable[[int], Any], count: int, workers: int, chunks: int) -> list:
+    """``[fn(0), ..., fn(count - 1)]``, in ``workers`` forked processes when > 1.
+
+    The children inherit ``fn`` and its data by fork (nothing is pickled but the results); each runs
+    single-threaded torch, and takes ``count / chunks`` consecutive calls at a time.
+    """
+    global _FORK_TASK
+    if workers <= 1 or count < 2 or "fork" not in multiprocessing.get_all_start_methods():
+        return [fn(k) for k in range(count)]
+    edges = np.linspace(0, count, min(chunks, count) + 1).astype(int)
+    _FORK_TASK = fn
+    try:
+        with multiprocessing.get_context("fork").Pool(min(workers, count)) as pool:
+            parts = pool.map(_run_chunk, list(itertools.pairwise(edges)), chunksize=1)
+    finally:
+        _FORK_TASK = None
+    return [result for part in parts for result in part]
 
 
 def _match_one(pipeline: BasePipeline, pair: tuple[int, int], get0: PairFeatures, get1: PairFeatures,
@@ -225,30 +262,12 @@ def _match_one(pipeline: BasePipeline, pair: tuple[int, int], get0: PairFeatures
     return pipeline.match(to_block_frame(f0, b0), to_block_frame(f1, b1), b0.shape, b1.shape)
 
 
-def _match_chunk(bounds: tuple[int, int]) -> list[Matches]:
-    torch.set_num_threads(1)
-    pipeline, pairs, get0, get1, blocks0, blocks1 = _FORK_TASK
-    return [_match_one(pipeline, pairs[k], get0, get1, blocks0, blocks1) for k in range(*bounds)]
-
-
 def match_pairs(pipeline: BasePipeline, pairs: list[tuple[int, int]], get0: PairFeatures, get1: PairFeatures,
                 blocks0: list[Block], blocks1: list[Block], workers: int = 1) -> list[Matches]:
-    """The base pipeline on many block pairs, in ``workers`` forked processes when > 1.
-
-    The children inherit the features by fork (nothing is pickled but the returned matches); each runs
-    single-threaded torch, so the pairs are spread over the CPU cores.
-    """
-    global _FORK_TASK
-    if workers <= 1 or len(pairs) < 4 * workers or "fork" not in multiprocessing.get_all_start_methods():
-        return [_match_one(pipeline, pair, get0, get1, blocks0, blocks1) for pair in pairs]
-    edges = np.linspace(0, len(pairs), 8 * workers + 1).astype(int)
-    _FORK_TASK = (pipeline, pairs, get0, get1, blocks0, blocks1)
-    try:
-        with multiprocessing.get_context("fork").Pool(workers) as pool:
-            chunks = pool.map(_match_chunk, list(itertools.pairwise(edges)))
-    finally:
-        _FORK_TASK = None
-    return [m for chunk in chunks for m in chunk]
+    """The base pipeline on many block pairs, in ``workers`` forked processes (see ``fork_map``) when > 1."""
+    workers = workers if len(pairs) >= 4 * workers else 1
+    return fork_map(lambda k: _match_one(pipeline, pairs[k], get0, get1, blocks0, blocks1), len(pairs), workers,
+                    8 * workers)
 
 
 def match_block_pairs(
@@ -273,14 +292,20 @@ def match_block_pairs(
     where1 = {w: (lv, i) for lv in levels1 for i, w in enumerate(lv.blocks)}
     pairs = [(w0, w1) for w0 in range(len(blocks0)) for w1 in range(len(blocks1))]
 
-    def own(where, side):
-        def get(pair):
-            level, i = where[pair[side]]
-            return level.features.subset(torch.from_numpy(level.members[i]))
-        return get
+    where = (where0, where1)
+
+    @functools.cache
+    def own_block(side: int, block: int) -> Features:
+        level, i = where[side][block]
+        return level.features.subset(torch.from_numpy(level.members[i]))
+
+    def own0(pair):
+        return own_block(0, pair[0])
+
+    def own1(pair):
+        return own_block(1, pair[1])
 
     # 3.2: the base pipeline with its own orientations, then RANSAC.
-    own0, own1 = own(where0, 0), own(where1, 1)
     first = match_pairs(pipeline, pairs, own0, own1, blocks0, blocks1, workers)
     results = ransac_homography_many([_positions(own0(p), own1(p), m) for p, m in zip(pairs, first)], ransac,
                                      seed=seed)
@@ -305,18 +330,20 @@ def match_block_pairs(
         level1, i1 = where1[pair[1]]
         requests0.setdefault(id(level0), {}).setdefault(0, []).append(level0.members[i0])
         requests1.setdefault(id(level1), {}).setdefault(bin_of[pair], []).append(level1.members[i1])
-    for levels, requests in ((levels0, requests0), (levels1, requests1)):
-        for level in levels:
-            wanted = {b: np.concatenate(parts) for b, parts in requests.get(id(level), {}).items()}
-            describe_fixed_bins(pipeline, level, wanted, bins)
+    describe_fixed_bins(pipeline, [(level, {b: np.concatenate(parts) for b, parts in requests[id(level)].items()})
+                                   for levels, requests in ((levels0, requests0), (levels1, requests1))
+                                   for level in levels if id(level) in requests], bins, workers)
+
+    @functools.cache
+    def fixed_block(side: int, block: int, bin_index: int) -> Features:
+        level, i = where[side][block]
+        return fixed_features(level, level.members[i], bin_index, bins)
 
     def fixed0(pair):
-        level, i = where0[pair[0]]
-        return fixed_features(level, level.members[i], 0, bins)
+        return fixed_block(0, pair[0], 0)
 
     def fixed1(pair):
-        level, i = where1[pair[1]]
-        return fixed_features(level, level.members[i], bin_of[pair], bins)
+        return fixed_block(1, pair[1], bin_of[pair])
 
     second = match_pairs(pipeline, refined_pairs, fixed0, fixed1, blocks0, blocks1, workers)
     results = ransac_homography_many([_positions(fixed0(p), fixed1(p), m) for p, m in zip(refined_pairs, second)],
@@ -367,6 +394,7 @@ __all__ = [
     "build_levels",
     "describe_fixed_bins",
     "fixed_features",
+    "fork_map",
     "match_block_pairs",
     "orientation_bin",
     "to_block_frame",

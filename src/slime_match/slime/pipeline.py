@@ -196,7 +196,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
             guide = FlowGuide(guide_xy0, guide_xy1, config.planes.t_perp)
             tile_xy0, tile_xy1, tile_scores = match_tiles(
                 pipeline, tile_levels0, tile_levels1, tiles0, tiles1, np.stack([ftheta.tile0, ftheta.tile1], 1),
-                selected["theta"], guide, bins=config.tiles.bins)
+                selected["theta"], guide, bins=config.tiles.bins, workers=_workers(config.workers, pipeline))
     counts["tile_matches"] = len(tile_xy0)
     with timer("global_dtm"):
         all0 = np.vstack([guide_xy0, tile_xy0])

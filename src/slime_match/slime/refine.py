@@ -11,7 +11,15 @@ from scipy.spatial import cKDTree
 
 from ..matching.dtm import DTMConfig, dtm_filter
 from ..pipelines import BasePipeline
-from .block_matching import ScaleLevel, describe_fixed_bins, fixed_features, orientation_bin, to_block_frame
+from ..types import Features, Matches
+from .block_matching import (
+    ScaleLevel,
+    describe_fixed_bins,
+    fixed_features,
+    fork_map,
+    orientation_bin,
+    to_block_frame,
+)
 from .blocks import Block
 
 
@@ -54,6 +62,7 @@ def match_tiles(
     thetas: np.ndarray,
     guide: FlowGuide,
     bins: int = 16,
+    workers: int = 1,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Base pipeline (no RANSAC) on the tile pairs of F^theta with the plane's fixed orientation.
 
@@ -63,6 +72,7 @@ def match_tiles(
         tile_pairs: (S, 2) tile indices (c, c') of each set of F^theta.
         thetas: (S,) the set's relative orientation theta^l_v (radians): theta = 0 in image 0, theta in 1.
         guide: the flow filter applied to the candidates before DTM.
+        workers: forked processes for the descriptors and the tile pairs (``fork_map``; same results).
 
     Returns:
         xy0, xy1 (T, 2) and scores (T,) of the tile matches, in original pixels.
@@ -75,24 +85,27 @@ def match_tiles(
     for c0, c1, b in jobs:
         for (level, i), bin_index in ((where0[c0], 0), (where1[c1], b)):
             requests.setdefault(id(level), (level, {}))[1].setdefault(bin_index, []).append(level.members[i])
-    for level, wanted in requests.values():
-        describe_fixed_bins(pipeline, level, {b: np.concatenate(parts) for b, parts in wanted.items()}, bins)
-    out0, out1, scores = [], [], []
-    for c0, c1, b in jobs:
+    describe_fixed_bins(pipeline, [(level, {b: np.concatenate(parts) for b, parts in wanted.items()})
+                                   for level, wanted in requests.values()], bins, workers)
+
+    def features(k: int) -> tuple[Features, Features]:
+        c0, c1, b = jobs[k]
         (level0, i0), (level1, i1) = where0[c0], where1[c1]
-        f0 = fixed_features(level0, level0.members[i0], 0, bins)
-        f1 = fixed_features(level1, level1.members[i1], b, bins)
+        return fixed_features(level0, level0.members[i0], 0, bins), fixed_features(level1, level1.members[i1], b, bins)
+
+    def match(k: int) -> Matches:
+        (c0, c1, _), (f0, f1) = jobs[k], features(k)
         if len(f0) < 4 or len(f1) < 4:
-            continue
+            return Matches.empty()
         offset0, offset1 = np.array(tiles0[c0].box[:2]), np.array(tiles1[c1].box[:2])
+        return pipeline.match(to_block_frame(f0, tiles0[c0]), to_block_frame(f1, tiles1[c1]), tiles0[c0].shape,
+                              tiles1[c1].shape, candidate_filter=lambda y0, y1: guide(y0 + offset0, y1 + offset1))
 
-        def flow_filter(y0, y1, offset0=offset0, offset1=offset1):
-            return guide(y0 + offset0, y1 + offset1)
-
-        m = pipeline.match(to_block_frame(f0, tiles0[c0]), to_block_frame(f1, tiles1[c1]), tiles0[c0].shape,
-                           tiles1[c1].shape, candidate_filter=flow_filter)
+    out0, out1, scores = [], [], []
+    for k, m in enumerate(fork_map(match, len(jobs), workers, len(jobs))):
         if len(m) == 0:
             continue
+        f0, f1 = features(k)
         out0.append(f0.xy[torch.from_numpy(m.idx0)].cpu().numpy())
         out1.append(f1.xy[torch.from_numpy(m.idx1)].cpu().numpy())
         scores.append(m.scores)
