@@ -179,15 +179,20 @@ def tile_sets(table: MatchTable, planes: sp.csr_matrix, tiles0: list[Block], til
     t0 = points_in_blocks(table.xy0, tiles0).T.tocsr()  # (M, C0)
     t1 = points_in_blocks(table.xy1, tiles1).T.tocsr()
     n0, n1 = np.diff(t0.indptr), np.diff(t1.indptr)
+    # the tile pairs of every match, c * C' + c', match after match: pair_key[start[m]:start[m + 1]]
+    count = n0 * n1
+    start = np.cumsum(count) - count
+    owner = np.repeat(np.arange(n_matches), count)
+    k = np.arange(int(count.sum())) - start[owner]
+    pair_key = (t0.indices[t0.indptr[owner] + k // n1[owner]].astype(np.int64) * len(tiles1)
+                + t1.indices[t1.indptr[owner] + k % n1[owner]])
+    # every membership (l, m) once per tile pair of m
     coo = planes.tocoo()
     pl, mi = coo.row.astype(np.int64), coo.col.astype(np.int64)
-    reps = n0[mi] * n1[mi]
-    e = np.repeat(np.arange(len(mi)), reps)
-    k = np.arange(int(reps.sum())) - np.repeat(np.cumsum(reps) - reps, reps)
-    m = mi[e]
-    c0 = t0.indices[t0.indptr[m] + k // n1[m]].astype(np.int64)
-    c1 = t1.indices[t1.indptr[m] + k % n1[m]].astype(np.int64)
-    key = (pl[e] * len(tiles0) + c0) * len(tiles1) + c1
+    reps = count[mi]
+    entry = np.arange(int(reps.sum())) + np.repeat(start[mi] - (np.cumsum(reps) - reps), reps)
+    m = np.repeat(mi, reps)
+    key = np.repeat(pl * (len(tiles0) * len(tiles1)), reps) + pair_key[entry]
     space = planes.shape[0] * len(tiles0) * len(tiles1)
     if space <= 8 * len(key) + (1 << 20):  # a presence table: np.unique's sorted keys and inverse, no sort
         present = np.zeros(space, bool)
