@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from slime_match.errors import ConfigError
-from slime_match.matching.nn import knn, match_fginn, match_mutual_nn, match_nn_ratio
+from slime_match.matching.nn import _smallest, knn, match_fginn, match_mutual_nn, match_nn_ratio
 
 
 def dists(d0, d1):
@@ -34,6 +34,19 @@ def test_knn_rows_and_columns_blocked():
     np.testing.assert_allclose(rd.numpy(), np.sort(dm, 1)[:, :4], rtol=1e-4, atol=1e-5)
     np.testing.assert_array_equal(ci.numpy(), np.argsort(dm, 0)[:3].T)
     np.testing.assert_allclose(cd.numpy(), np.sort(dm, 0)[:3].T, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("shape", [(30, 40), (50, 300), (7, 1000)])
+def test_smallest_sorted_with_ties_to_the_lowest_index(shape):
+    g = torch.Generator().manual_seed(shape[1])
+    for d in (torch.rand(shape, generator=g), torch.randint(0, 6, shape, generator=g).float()):  # many ties
+        for k in (1, 10, shape[1]):
+            vals, idx = _smallest(d, k)
+            order = np.argsort(d.numpy(), axis=1, kind="stable")[:, :k]
+            np.testing.assert_array_equal(idx.numpy(), order)
+            np.testing.assert_array_equal(vals.numpy(), np.take_along_axis(d.numpy(), order, 1))
+    d[3, :] = float("nan")  # no bound: the torch.topk fallback
+    assert _smallest(d, 5)[0].shape == (shape[0], 5)
 
 
 def test_ratio_constructed_and_brute_force():

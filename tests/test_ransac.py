@@ -1,5 +1,7 @@
 """Synthetic RANSAC checks: known H / F among 50% outliers, degenerate inputs, determinism, backends."""
 
+import itertools
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -11,6 +13,8 @@ from slime_match.geometry.homography import project, two_sided_error
 from slime_match.geometry.ransac import (
     FundamentalRansacConfig,
     HomographyRansacConfig,
+    _has_far_quadruple,
+    _min_pair_distance,
     ransac_fundamental,
     ransac_homography,
     ransac_homography_many,
@@ -103,6 +107,26 @@ def test_ransac_homography_many_matches_single_runs():
     assert results[12].model is None and results[12].inliers.shape == (2,)
     single = ransac_homography_many([problems[3]], seed=5)[0]
     assert np.array_equal(single.inliers, ransac_homography(*problems[3], seed=5).inliers)
+
+
+def test_has_far_quadruple_brute_force():
+    rng = np.random.default_rng(7)
+    for n in range(4, 12):
+        for spread in (20.0, 40.0, 80.0):
+            x = rng.uniform(0, spread, (n, 4))
+            samples = np.array(list(itertools.combinations(range(n), 4)))
+            ref = bool((_min_pair_distance(x[samples]) > 15.0).any())
+            assert _has_far_quadruple(x, 15.0) == ref, (n, spread)
+
+
+def test_ransac_homography_many_clustered_problem_draws_to_the_cap():
+    """A problem whose samples all fail the distance test: no model, max_iterations reported, others solved."""
+    rng = np.random.default_rng(3)
+    x0, x1, gt = _homography_problem(rng, 200, ratio=0.3)
+    cluster = rng.uniform(0, 10, (12, 2))
+    results = ransac_homography_many([(cluster, cluster + 5), (x0, x1)])
+    assert results[0].model is None and results[0].info["iterations"] == HomographyRansacConfig().max_iterations
+    _check_homography(results[1], x0, gt, max_false=0.1)
 
 
 @pytest.mark.parametrize("planes", [False, True])

@@ -1,5 +1,7 @@
 """Slime block levels: shared (one detection per scale) vs per-block detection (the paper's prototype)."""
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -15,6 +17,7 @@ from slime_match.slime.block_matching import (
     build_levels,
     describe_fixed_bins,
     fixed_features,
+    fork_map,
     translate_features,
 )
 from slime_match.slime.blocks import make_blocks, points_in_blocks
@@ -94,6 +97,18 @@ def test_fixed_orientation_descriptors_use_the_crop_context(levels):
         # without the origin shift the same call samples other pixels: the check above can fail
         wrong = pipeline.describe_fixed(lv.context, lv.features.subset(torch.from_numpy(same)), 3 * 2 * np.pi / 16)
         assert (wrong.descriptors * ref).sum(dim=1).median() < 0.9
+
+
+def test_fork_map_and_forked_descriptors_equal_one_process(levels):
+    assert fork_map(lambda k: k * k, 11, 2, 3) == [k * k for k in range(11)]
+    pipeline, _, _, shared, _ = levels
+    out = []
+    for workers in (1, 2):
+        fresh = [dataclasses.replace(lv, fixed={}) for lv in shared]
+        wanted = [(lv, {b: np.arange(0, len(lv.features), 1 + b) for b in (0, 3, 5)}) for lv in fresh]
+        describe_fixed_bins(pipeline, wanted, 16, workers)
+        out.append([fixed_features(lv, index, b, 16).descriptors for lv, bins in wanted for b, index in bins.items()])
+    assert all(torch.equal(a, b) for a, b in zip(*out, strict=True))
 
 
 def test_translate_features_moves_centres_only():
