@@ -1,7 +1,7 @@
 """Slime's speed next to its quality: per-stage seconds, peak memory, correct matches, the base Hz+ on the same
 pair, and the shared vs per-block detection ablation; OpenCV SIFT as a same-process reference.
 
-    python benchmarks/bench_slime.py [--out results/bench_slime.json] [--descriptor tfeat]
+    python benchmarks/bench_slime.py [--out results/bench_slime.json] [--descriptor tfeat] [--skip-ablation]
     python benchmarks/bench_slime.py --device cuda --descriptor hardnet      # the GPU run
 
 Pairs: graf img1 -> img3 resized (cv2.INTER_AREA) to 640x480 and 1200x900; the GT homography is scaled with
@@ -236,6 +236,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--out", default="results/bench_slime.json", help="JSON output path")
     parser.add_argument("--data", default=str(SHARED / "data"), help="folder holding oxford_graf/")
     parser.add_argument("--skip-large", action="store_true", help="skip the 1200x900 run")
+    parser.add_argument("--skip-ablation", action="store_true",
+                        help="skip the per-block detection ablation (minutes on a CPU)")
     args = parser.parse_args(argv)
     if args.device == "cuda" and not torch.cuda.is_available():
         raise SystemExit("--device cuda: no CUDA device available")
@@ -269,8 +271,9 @@ def main(argv: list[str] | None = None) -> dict:
     weight_free = bench_slime_vs_base("Slime weight-free (Baumberg + gradient + RootSIFT) 640x480", WEIGHT_FREE,
                                       pairs["640x480"], args.device, TARGETS_S["slime_weight-free_640x480"])
     runs["weight-free 640x480"] = weight_free
-    runs["ablation shared vs per-block detection, weight-free 640x480"] = bench_ablation(
-        pairs["640x480"], args.device, weight_free["slime"])
+    if not args.skip_ablation:
+        runs["ablation shared vs per-block detection, weight-free 640x480"] = bench_ablation(
+            pairs["640x480"], args.device, weight_free["slime"])
     print()
     runs["opencv_sift"] = bench_opencv_sift(pairs)
     report["meta"]["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
