@@ -1,11 +1,13 @@
 """DTM speed on recorded real calls, with a check that the outputs equal the recorded ones.
 
+    python benchmarks/bench_dtm.py --record [CALLS]      # record the calls of one Slime run (~1 min)
     python benchmarks/bench_dtm.py [CALLS] [--out results/bench_dtm.json] [--repeat 1] [--every 1]
                                    [--baseline GIT_REV]
 
 CALLS (default /tmp/dtm_calls_slime.pkl) is a pickled list of dicts, one per ``dtm_filter`` call: its
 arguments xy0, xy1, scores, size0, size1, unmatched0, unmatched1 (default config) and the recorded outputs
-keep, removed_at, restored. ``--every N`` takes every N-th call. A round runs all calls once, in this
+keep, removed_at, restored. ``--record`` writes it: every call of one weight-free Slime run on graf
+1 -> 3 at 640x480 (``bench_slime.py``'s pair), in this process (669 calls at the time of writing). ``--every N`` takes every N-th call. A round runs all calls once, in this
 process, on one thread; the reported times are the smallest over ``--repeat`` rounds: wall-clock seconds
 and this process's CPU seconds (less sensitive to other processes on a busy machine). ``--baseline REV``
 also times the ``dtm.py`` of that git revision, its rounds alternating with the current code's, so both
@@ -50,6 +52,36 @@ def load_baseline(rev: str, folder: Path) -> ModuleType:
     return module
 
 
+def record_calls(path: Path) -> int:
+    """Run weight-free Slime (one worker) on bench_slime.py's 640x480 pair and pickle its dtm_filter calls."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_slime import WEIGHT_FREE, load_pair
+
+    from slime_match import pipelines
+    from slime_match.config import make_config
+    from slime_match.matcher import Matcher
+
+    calls = []
+
+    def recording(xy0, xy1, scores, size0, size1, unmatched0=None, unmatched1=None, config=None):
+        res = dtm.dtm_filter(xy0, xy1, scores, size0, size1, unmatched0, unmatched1, config)
+        calls.append({"xy0": np.asarray(xy0), "xy1": np.asarray(xy1), "scores": np.asarray(scores),
+                      "size0": size0, "size1": size1, "unmatched0": unmatched0, "unmatched1": unmatched1,
+                      "keep": res.keep, "removed_at": res.removed_at, "restored": res.restored})
+        return res
+
+    a, b, _ = load_pair(ROOT.parent / "shared" / "data", 640, 480)
+    pipelines.dtm_filter = recording
+    try:
+        Matcher(make_config("slime", workers=1, **WEIGHT_FREE))(a, b)
+    finally:
+        pipelines.dtm_filter = dtm.dtm_filter
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as f:
+        pickle.dump(calls, f)
+    return len(calls)
+
+
 def run_round(module: ModuleType, calls: list[dict]) -> tuple[float, float, bool]:
     """Wall-clock and CPU seconds for all calls, and whether every output equals the recorded one."""
     equal = True
@@ -67,13 +99,18 @@ def run_round(module: ModuleType, calls: list[dict]) -> tuple[float, float, bool
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("calls", nargs="?", default="/tmp/dtm_calls_slime.pkl")
+    parser.add_argument("calls", nargs="?", type=Path, default=Path("/tmp/dtm_calls_slime.pkl"))
+    parser.add_argument("--record", action="store_true", help="write CALLS from one Slime run and exit")
     parser.add_argument("--out", type=Path)
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--every", type=int, default=1)
     parser.add_argument("--baseline", help="git revision whose dtm.py is timed too")
     args = parser.parse_args()
-
+    if args.record:
+        print(f"recorded {record_calls(args.calls)} calls -> {args.calls}")
+        return
+    if not args.calls.is_file():
+        raise SystemExit(f"{args.calls} not found: record it first with --record")
     with open(args.calls, "rb") as f:
         calls = pickle.load(f)[:: args.every]
     with tempfile.TemporaryDirectory() as folder:
