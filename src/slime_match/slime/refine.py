@@ -11,7 +11,6 @@ from scipy.spatial import cKDTree
 
 from ..matching.dtm import DTMConfig, dtm_filter
 from ..pipelines import BasePipeline
-from ..types import Features, Matches
 from .block_matching import (
     ScaleLevel,
     describe_fixed_bins,
@@ -88,27 +87,24 @@ def match_tiles(
     describe_fixed_bins(pipeline, [(level, {b: np.concatenate(parts) for b, parts in wanted.items()})
                                    for level, wanted in requests.values()], bins, workers)
 
-    def features(k: int) -> tuple[Features, Features]:
+    def match(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Matched positions (tile-pair features' own xy) and scores of job k, None when nothing matched."""
         c0, c1, b = jobs[k]
         (level0, i0), (level1, i1) = where0[c0], where1[c1]
-        return fixed_features(level0, level0.members[i0], 0, bins), fixed_features(level1, level1.members[i1], b, bins)
-
-    def match(k: int) -> Matches:
-        (c0, c1, _), (f0, f1) = jobs[k], features(k)
+        f0 = fixed_features(level0, level0.members[i0], 0, bins)
+        f1 = fixed_features(level1, level1.members[i1], b, bins)
         if len(f0) < 4 or len(f1) < 4:
-            return Matches.empty()
+            return None
         offset0, offset1 = np.array(tiles0[c0].box[:2]), np.array(tiles1[c1].box[:2])
-        return pipeline.match(to_block_frame(f0, tiles0[c0]), to_block_frame(f1, tiles1[c1]), tiles0[c0].shape,
-                              tiles1[c1].shape, candidate_filter=lambda y0, y1: guide(y0 + offset0, y1 + offset1))
-
-    out0, out1, scores = [], [], []
-    for k, m in enumerate(fork_map(match, len(jobs), workers, len(jobs))):
+        m = pipeline.match(to_block_frame(f0, tiles0[c0]), to_block_frame(f1, tiles1[c1]), tiles0[c0].shape,
+                           tiles1[c1].shape, candidate_filter=lambda y0, y1: guide(y0 + offset0, y1 + offset1))
         if len(m) == 0:
-            continue
-        f0, f1 = features(k)
-        out0.append(f0.xy[torch.from_numpy(m.idx0)].cpu().numpy())
-        out1.append(f1.xy[torch.from_numpy(m.idx1)].cpu().numpy())
-        scores.append(m.scores)
+            return None
+        return (f0.xy[torch.from_numpy(m.idx0)].cpu().numpy(), f1.xy[torch.from_numpy(m.idx1)].cpu().numpy(),
+                m.scores)
+
+    found = [r for r in fork_map(match, len(jobs), workers, len(jobs)) if r is not None]
+    out0, out1, scores = (list(column) for column in zip(*found)) if found else ([], [], [])
     if not out0:
         return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
     return (np.concatenate(out0).astype(np.float64), np.concatenate(out1).astype(np.float64),
