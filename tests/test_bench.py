@@ -12,7 +12,7 @@ import pytest
 from conftest import DATA, require
 
 from slime_match.errors import ConfigError
-from slime_match.eval import bench, methods
+from slime_match.eval import bench, methods, report
 from slime_match.eval import metrics as M
 
 HZ_FREE = "hz+:descriptor=rootsift,shape=baumberg,orientation=gradient,max_keypoints=600"
@@ -140,8 +140,26 @@ def test_table_consistent_with_metrics(first_run):
     assert "| RootSIFT | 3 |" in table and "| RootSIFT | -- |" in table
     assert (
         table.count("Hz+ [descriptor=rootsift, shape=baumberg, orientation=gradient, max_keypoints=600] |")
-        == 3 + 1
-    )  # + time
+        == 1 + 1 + 2 + 1
+    )  # main, original vs rotated, detailed (2 thresholds), time
+
+
+def test_rotated_pairs_table(first_run):
+    """The planar pairs are also reported split into original and rotated pairs, from the same records."""
+    out, _ = first_run
+    summary = json.loads((out / "metrics.json").read_text())
+    agg = report.aggregate(summary)
+    original, rotated = summary["pairs"][0], summary["pairs"][1]
+    for method in summary["methods"]:
+        for th in summary["config"]["thresholds"]:
+            for group, pair in (("planar original", original), ("planar rotated", rotated)):
+                rec = pair["methods"][method]["thresholds"][th]
+                row = agg["rotation_rows"][(group, method, th)]
+                assert row["pairs"] == 1
+                assert row["coverage"] == pytest.approx(100 * rec["coverage"])
+                assert row["no_match"] == (rec["n_matches"] == 0)
+    table = (out / "table.md").read_text()
+    assert "### Planar pairs: original vs rotated" in table and "planar original 1, planar rotated 1 pairs" in table
 
 
 def test_metrics_are_meaningful(first_run):

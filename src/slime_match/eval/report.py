@@ -7,7 +7,8 @@ mAA of Eq. acc_formula in % (thresholds 1..t_perp px), "no match" counts pairs w
 "wrong only" pairs with matches but none correct. The best threshold of a method maximises its non-planar
 accuracy (planar when there are no non-planar pairs), as in the paper's main table. Pose pairs add the
 AUC@5/10/20 of the max(rotation, translation) angular error, at the essential-matrix RANSAC threshold
-with the highest AUC sum over the group.
+with the highest AUC sum over the group. When the planar pairs include rotated variants, a second table
+splits them into original and rotated pairs (where upright methods are expected to fail).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from slime_match.geometry.homography import project
 from slime_match.io import _atomic_write, save_figure
 
 GROUPS = ("planar", "non-planar")
+ROTATION_GROUPS = {"planar original": True, "planar rotated": False}  # subgroup -> pairs' "upright" flag
 COLUMNS = ("coverage", "precision", "accuracy", "no_match", "wrong_only")
 HEADERS = {
     "coverage": "Coverage (%)",
@@ -52,7 +54,8 @@ def aggregate(summary: dict[str, Any]) -> dict[str, Any]:
     """Per group, method and threshold: the table values; plus times, best thresholds and pose AUC.
 
     Returns:
-        {"rows": {(group, method, threshold): {column: value, "pairs": n}}, "best": {method: threshold},
+        {"rows": {(group, method, threshold): {column: value, "pairs": n}}, "rotation_rows": the same for
+        the planar pairs split into ``ROTATION_GROUPS`` (empty unless both kinds exist), "best": {method: threshold},
         "seconds": {method: {"mean": s, "pairs": n}}, "pose": {(method, threshold): {"auc@5": ...,
         "essential_threshold": t, "pairs": n}}}
     """
@@ -62,24 +65,13 @@ def aggregate(summary: dict[str, Any]) -> dict[str, Any]:
     pairs = summary["pairs"]
     rows: dict[tuple[str, str, str], dict[str, float]] = {}
     for group in GROUPS:
-        members = [p for p in pairs if p["group"] == group]
-        if not members:
-            continue
-        for m in methods:
-            for th in thresholds:
-                recs = [p["methods"][m]["thresholds"][th] for p in members]
-                n = np.array([r["n_matches"] for r in recs])
-                c = np.array([r["n_correct"] for r in recs])
-                fails = M.failure_counts(n, c)
-                rows[(group, m, th)] = {
-                    "coverage": 100 * float(np.mean([r["coverage"] for r in recs])),
-                    "precision": 100 * float(np.mean([r["precision"] for r in recs])),
-                    "accuracy": 100
-                    * M.mean_average_accuracy(np.array([_error(r["error"]) for r in recs]), t_perp),
-                    "no_match": fails["no_matches"],
-                    "wrong_only": fails["only_wrong"],
-                    "pairs": len(recs),
-                }
+        rows.update(_rows(group, [p for p in pairs if p["group"] == group], methods, thresholds, t_perp))
+    planar = [p for p in pairs if p["group"] == "planar"]
+    rotation_rows: dict[tuple[str, str, str], dict[str, float]] = {}
+    if any(p["upright"] for p in planar) and not all(p["upright"] for p in planar):
+        for subgroup, upright in ROTATION_GROUPS.items():
+            members = [p for p in planar if p["upright"] == upright]
+            rotation_rows.update(_rows(subgroup, members, methods, thresholds, t_perp))
     pick = "non-planar" if any(k[0] == "non-planar" for k in rows) else "planar"
     best = {
         m: max(thresholds, key=lambda th: (rows[(pick, m, th)]["accuracy"], -thresholds.index(th)))
@@ -91,11 +83,37 @@ def aggregate(summary: dict[str, Any]) -> dict[str, Any]:
     }
     return {
         "rows": rows,
+        "rotation_rows": rotation_rows,
         "best": best,
         "best_group": pick,
         "seconds": seconds,
         "pose": _pose_auc(pairs, methods, thresholds),
     }
+
+
+def _rows(
+    group: str, members: list[dict], methods: list[str], thresholds: list[str], t_perp: int
+) -> dict[tuple[str, str, str], dict[str, float]]:
+    """{(group, method, threshold): table values over the pairs ``members``} (empty without pairs)."""
+    rows = {}
+    if not members:
+        return rows
+    for m in methods:
+        for th in thresholds:
+            recs = [p["methods"][m]["thresholds"][th] for p in members]
+            n = np.array([r["n_matches"] for r in recs])
+            c = np.array([r["n_correct"] for r in recs])
+            fails = M.failure_counts(n, c)
+            rows[(group, m, th)] = {
+                "coverage": 100 * float(np.mean([r["coverage"] for r in recs])),
+                "precision": 100 * float(np.mean([r["precision"] for r in recs])),
+                "accuracy": 100
+                * M.mean_average_accuracy(np.array([_error(r["error"]) for r in recs]), t_perp),
+                "no_match": fails["no_matches"],
+                "wrong_only": fails["only_wrong"],
+                "pairs": len(recs),
+            }
+    return rows
 
 
 def _pose_auc(pairs: list[dict], methods: list[str], thresholds: list[str]) -> dict:
@@ -132,8 +150,8 @@ def _thr(th: str) -> str:
 
 
 def markdown_tables(summary: dict[str, Any], agg: dict[str, Any]) -> str:
-    """The report in Markdown: main table (best threshold), detailed table (every threshold), pose AUC,
-    times."""
+    """The report in Markdown: main table (best threshold), planar original vs rotated pairs, detailed table
+    (every threshold), pose AUC, times."""
     methods, thresholds = list(summary["methods"]), summary["config"]["thresholds"]
     groups = [g for g in GROUPS if any(k[0] == g for k in agg["rows"])]
     counts = {g: next(v["pairs"] for k, v in agg["rows"].items() if k[0] == g) for g in groups}
@@ -155,6 +173,27 @@ def markdown_tables(summary: dict[str, Any], agg: dict[str, Any]) -> str:
         "| " + " | ".join(sep) + " |",
     ]
     lines += [row(m, agg["best"][m]) for m in methods]
+    if agg["rotation_rows"]:
+        sub = {
+            g: next(v["pairs"] for k, v in agg["rotation_rows"].items() if k[0] == g) for g in ROTATION_GROUPS
+        }
+        rot_head = ["Method", "RANSAC thr. (px)"] + [
+            f"{g}: {HEADERS[c]}" for g in ROTATION_GROUPS for c in COLUMNS
+        ]
+        lines += [
+            "",
+            "### Planar pairs: original vs rotated by the added rotations (best RANSAC threshold; "
+            + ", ".join(f"{g} {n}" for g, n in sub.items())
+            + " pairs)",
+            "",
+            "| " + " | ".join(rot_head) + " |",
+            "| " + " | ".join(["---"] * len(rot_head)) + " |",
+        ]
+        for m in methods:
+            th = agg["best"][m]
+            cells = [method_title(summary["methods"][m]), _thr(th)]
+            cells += [_fmt(c, agg["rotation_rows"][(g, m, th)][c]) for g in ROTATION_GROUPS for c in COLUMNS]
+            lines.append("| " + " | ".join(cells) + " |")
     lines += [
         "",
         "### Detailed results (every RANSAC threshold; -- = no RANSAC)",
