@@ -1,0 +1,343 @@
+"""End-to-end learned peers for ``slime bench``: kornia's LoFTR and DISK + LightGlue.
+
+Both follow the call contract of :mod:`slime_match.eval.methods`: ``method(image0, image1) -> (xy0, xy1,
+scores, seconds)`` with (H, W, 3) float32 RGB images in [0, 1], (K, 2) float64 keypoints in pixels of the given
+images (centre of the top-left pixel = (0, 0)), (K,) float64 dissimilarities (lower is better) and the
+wall-clock seconds of the matching alone (models are built lazily on the first call and not timed).
+
+Weights: the models load kornia's pretrained checkpoints through kornia itself (``LoFTR(pretrained=...)``,
+``DISK.from_pretrained``, ``LightGlue("disk")``), i.e. from the torch-hub cache ``torch.hub.get_dir()/checkpoints``
+(follows ``TORCH_HOME``), downloading them there when the network allows it. When they are neither cached nor
+downloadable, :class:`~slime_match.errors.WeightsNotFoundError` names the model, the cache folder and the
+weight-free alternatives; there is no fallback to another model.
+
+Conventions:
+    - LoFTR gets the grey image resized so that its longest side is at most ``max_side`` and both sides are
+      multiples of 8; kornia documents its keypoints in a frame where pixel (x, y) has its centre at
+      (x + 0.5, y + 0.5), so 0.5 is subtracted before mapping them back to the original pixels. Scores are
+      ``1 - confidence`` (LoFTR's coarse dual-softmax confidence; kornia keeps only confidence > threshold).
+    - DISK gets the RGB image resized so that its longest side is at most ``max_side`` (zero-padded to multiples
+      of 16 by kornia, no keypoint in the padding); its keypoints are integer pixels of the resized image.
+      LightGlue matches them; scores are ``1 - LightGlue's matching score`` (kornia's ``scores``, in [0, 1], only
+      matches above ``threshold`` are returned).
+    - Resizing uses OpenCV (area when shrinking), whose pixel grid maps pixel centre ``x`` of the resized image to
+      ``(x + 0.5) * W / w - 0.5`` of the original; :func:`to_original` applies that per axis.
+"""
+
+from __future__ import annotations
+
+import copy
+import http.client
+import logging
+import time
+import urllib.error
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import cv2
+import numpy as np
+import torch
+
+from slime_match.errors import ConfigError, WeightsNotFoundError
+
+if TYPE_CHECKING:
+    from slime_match.eval.methods import MethodOutput
+
+logger = logging.getLogger("slime_match")
+
+ALTERNATIVES = "keynet, hz+, rootsift, opencv-sift (or slime)"
+LOFTR_WEIGHTS = ("outdoor", "indoor", "indoor_new")
+
+# Errors of a failed transfer (older kornia lets torch.hub's raise through unchanged).
+_NETWORK_ERRORS = (urllib.error.URLError, ConnectionError, TimeoutError, http.client.HTTPException)
+# kornia >= 0.8 wraps every failed source into one RuntimeError starting with this text.
+_KORNIA_ALL_FAILED = "Failed to load weights from"
+
+
+def _methods() -> Any:
+    """slime_match.eval.methods, imported on use so that methods.py can import this module at its top."""
+    from slime_match.eval import methods
+
+    return methods
+
+
+# --------------------------------------------------------------------------------------------- geometry
+
+
+def fit_size(height: int, width: int, max_side: int, multiple: int = 1) -> tuple[int, int]:
+    """Size (h, w) of the resized image: longest side <= max_side, both sides multiples of ``multiple``.
+
+    The image is only shrunk to meet ``max_side`` (0 = no limit); rounding each side to the nearest multiple
+    may then change its aspect ratio slightly, which :func:`to_original` undoes per axis.
+
+    Args:
+        height, width: original size in pixels.
+        max_side: bound on the longest side (0 = none); must be >= ``multiple`` when set.
+        multiple: each returned side is a positive multiple of it.
+    """
+    longest = max(height, width)
+    scale = max_side / longest if max_side and longest > max_side else 1.0
+    limit = (max_side // multiple) * multiple if max_side else None
+
+    def side(n: int) -> int:
+        s = max(multiple, int(n * scale / multiple + 0.5) * multiple)
+        return min(s, limit) if limit is not None else s
+
+    return side(height), side(width)
+
+
+def resize_to(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``image`` (H, W[, C]) resized to ``size`` = (h, w) with OpenCV (area when shrinking, else bilinear)."""
+    h, w = size
+    height, width = image.shape[:2]
+    if (h, w) == (height, width):
+        return np.ascontiguousarray(image, dtype=np.float32)
+    interpolation = cv2.INTER_AREA if h <= height and w <= width else cv2.INTER_LINEAR
+    return cv2.resize(np.ascontiguousarray(image, dtype=np.float32), (w, h), interpolation=interpolation)
+
+
+def to_original(xy: np.ndarray, size: tuple[int, int], original: tuple[int, int]) -> np.ndarray:
+    """Map (K, 2) pixel positions (x, y) of an image resized to ``size`` = (h, w) back to ``original`` = (H, W).
+
+    Pixel centres are integers in both frames and the image edges coincide, so
+    ``x_original = (x + 0.5) * W / w - 0.5`` (and likewise for y).
+    """
+    (h, w), (height, width) = size, original
+    scale = np.array([width / w, height / h])
+    return (np.asarray(xy, dtype=np.float64).reshape(-1, 2) + 0.5) * scale - 0.5
+
+
+# --------------------------------------------------------------------------------------------- weights
+
+
+def _download_failed(exc: BaseException) -> bool:
+    """Whether ``exc`` says the weights could not be fetched or loaded (not an unrelated bug)."""
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        seen.add(id(cur))
+        if isinstance(cur, _NETWORK_ERRORS):
+            return True
+        if isinstance(cur, RuntimeError) and str(cur).startswith(_KORNIA_ALL_FAILED):
+            return True
+        cur = cur.__cause__
+    return False
+
+
+@contextmanager
+def _pretrained(model: str) -> Iterator[None]:
+    """Around a kornia pretrained constructor: a failed download becomes WeightsNotFoundError naming ``model``.
+
+    kornia's per-attempt warnings are muted (the error says it all); other errors pass through unchanged.
+    """
+    folder = f"{torch.hub.get_dir()}/checkpoints"
+    logger.info("%s: loading kornia's weights from %s (downloaded there when missing)", model, folder)
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings(
+                "ignore", message=r"(Transient failure fetching|Failed to load weights from)"
+            )
+            yield
+    except Exception as exc:
+        if not _download_failed(exc):
+            raise
+        cause = str(exc).splitlines()[0].rstrip(".") if str(exc) else ""
+        raise WeightsNotFoundError(
+            f"{model} weights are missing from (or unreadable in) the torch-hub cache {folder} and could not be "
+            f"downloaded ({type(exc).__name__}: {cause}). Download them there on a machine with network access (kornia "
+            f"does it on first use; set TORCH_HOME to move the cache), or use a method without these weights: "
+            f"{ALTERNATIVES}"
+        ) from exc
+
+
+def _check_device(name: str, what: str) -> None:
+    if name == "auto":
+        return
+    try:
+        torch.device(name)
+    except (RuntimeError, ValueError) as exc:
+        raise ConfigError(f"{what} device must be auto, cpu or cuda[:N], got {name!r}") from exc
+
+
+def _check_max_side(value: Any, multiple: int, what: str) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or (value != 0 and value < max(multiple, 16)):
+        raise ConfigError(
+            f"{what} max_side must be 0 (no limit) or an integer >= {max(multiple, 16)}, got {value!r}"
+        )
+
+
+def _check_threshold(value: Any, what: str) -> None:
+    if value is not None and (
+        isinstance(value, bool) or not isinstance(value, int | float) or not 0 <= value < 1
+    ):
+        raise ConfigError(f"{what} threshold must be None (kornia's default) or in [0, 1), got {value!r}")
+
+
+def _numpy(t: torch.Tensor) -> np.ndarray:
+    return t.detach().float().cpu().numpy().astype(np.float64)
+
+
+# --------------------------------------------------------------------------------------------- LoFTR
+
+
+@dataclass
+class LoFTRConfig:
+    """kornia LoFTR (detector-free, dense transformer matching).
+
+    Attributes:
+        weights: pretrained model, "outdoor" (MegaDepth) | "indoor" | "indoor_new" (ScanNet).
+        max_side: longest side (pixels) of the image LoFTR sees, 0 = no downscaling; sides are rounded to
+            multiples of 8. 840 is the usual outdoor setting.
+        threshold: coarse confidence above which a match is kept; None = kornia's default (0.2).
+        device: "auto" | "cpu" | "cuda".
+    """
+
+    weights: str = "outdoor"
+    max_side: int = 840
+    threshold: float | None = None
+    device: str = "auto"
+
+
+class KorniaLoFTR:
+    """kornia's LoFTR on the grey images; scores are ``1 - confidence``.
+
+    Raises (on the first call):
+        WeightsNotFoundError: the LoFTR checkpoint is neither cached nor downloadable.
+    """
+
+    def __init__(self, **options: Any) -> None:
+        self.config = _methods()._dataclass_from(LoFTRConfig, options, "loftr")
+        cfg = self.config
+        if cfg.weights not in LOFTR_WEIGHTS:
+            raise ConfigError(f"loftr weights must be one of {', '.join(LOFTR_WEIGHTS)}, got {cfg.weights!r}")
+        _check_max_side(cfg.max_side, 8, "loftr")
+        _check_threshold(cfg.threshold, "loftr")
+        _check_device(cfg.device, "loftr")
+        self._model: torch.nn.Module | None = None
+
+    def _build(self) -> None:
+        import kornia.feature as KF
+        from kornia.feature.loftr.loftr import default_cfg
+
+        cfg = self.config
+        self.device = _methods()._device(cfg.device)
+        config = copy.deepcopy(default_cfg)
+        if cfg.threshold is not None:
+            config["match_coarse"]["thr"] = float(cfg.threshold)
+        with _pretrained(f"LoFTR '{cfg.weights}'"):
+            model = KF.LoFTR(pretrained=cfg.weights, config=config)
+        self._model = model.eval().to(self.device)
+
+    def _prepare(self, image: np.ndarray) -> tuple[torch.Tensor, tuple[int, int]]:
+        """(H, W, 3) RGB -> (1, 1, h, w) grey tensor on the device, and (h, w)."""
+        grey = _methods()._grey(image)
+        size = fit_size(*grey.shape, self.config.max_side, 8)
+        return torch.from_numpy(resize_to(grey, size))[None, None].to(self.device), size
+
+    @torch.inference_mode()
+    def __call__(self, image0: np.ndarray, image1: np.ndarray) -> MethodOutput:
+        m = _methods()
+        if self._model is None:
+            self._build()
+        m._sync()
+        start = time.perf_counter()
+        (t0, size0), (t1, size1) = self._prepare(image0), self._prepare(image1)
+        out = self._model({"image0": t0, "image1": t1})
+        # kornia's LoFTR frame puts pixel centres at +0.5: shift to integer centres, then undo the resize
+        xy0 = to_original(_numpy(out["keypoints0"]) - 0.5, size0, image0.shape[:2])
+        xy1 = to_original(_numpy(out["keypoints1"]) - 0.5, size1, image1.shape[:2])
+        scores = 1.0 - _numpy(out["confidence"]).reshape(-1)
+        m._sync()
+        return xy0, xy1, scores, time.perf_counter() - start
+
+
+# --------------------------------------------------------------------------------------------- DISK + LightGlue
+
+
+@dataclass
+class DiskLightGlueConfig:
+    """kornia DISK ("depth" weights) keypoints + descriptors matched by LightGlue ("disk" weights).
+
+    Attributes:
+        num_features: DISK keypoints per image (at most; the strongest heatmap maxima).
+        max_side: longest side (pixels) of the image DISK sees, 0 = no downscaling (LightGlue's usual 1024).
+        threshold: LightGlue matching score above which a match is kept; None = kornia's default (0.1).
+        device: "auto" | "cpu" | "cuda".
+    """
+
+    num_features: int = 2048
+    max_side: int = 1024
+    threshold: float | None = None
+    device: str = "auto"
+
+
+class KorniaDiskLightGlue:
+    """kornia DISK + LightGlue on the RGB images; scores are ``1 - LightGlue's matching score``.
+
+    Raises (on the first call):
+        WeightsNotFoundError: the DISK or the LightGlue checkpoint is neither cached nor downloadable.
+    """
+
+    def __init__(self, **options: Any) -> None:
+        self.config = _methods()._dataclass_from(DiskLightGlueConfig, options, "disk-lightglue")
+        cfg = self.config
+        if (
+            isinstance(cfg.num_features, bool)
+            or not isinstance(cfg.num_features, int)
+            or cfg.num_features < 2
+        ):
+            raise ConfigError(
+                f"disk-lightglue num_features must be an integer >= 2, got {cfg.num_features!r}"
+            )
+        _check_max_side(cfg.max_side, 16, "disk-lightglue")
+        _check_threshold(cfg.threshold, "disk-lightglue")
+        _check_device(cfg.device, "disk-lightglue")
+        self._disk: torch.nn.Module | None = None
+        self._lightglue: torch.nn.Module | None = None
+
+    def _build(self) -> None:
+        import kornia.feature as KF
+
+        cfg = self.config
+        self.device = _methods()._device(cfg.device)
+        with _pretrained("DISK 'depth'"):
+            disk = KF.DISK.from_pretrained("depth", device=torch.device("cpu"))
+        params = {} if cfg.threshold is None else {"filter_threshold": float(cfg.threshold)}
+        with _pretrained("LightGlue 'disk'"):
+            lightglue = KF.LightGlue("disk", **params)
+        self._disk = disk.eval().to(self.device)
+        self._lightglue = lightglue.eval().to(self.device)
+
+    def _features(self, image: np.ndarray) -> tuple[torch.Tensor, torch.Tensor, tuple[int, int]]:
+        """(H, W, 3) RGB -> DISK keypoints (N, 2) in resized pixels, descriptors (N, 128), resized (h, w)."""
+        size = fit_size(*image.shape[:2], self.config.max_side)
+        rgb = torch.from_numpy(resize_to(image, size)).permute(2, 0, 1)[None].to(self.device)
+        feats = self._disk(rgb, n=self.config.num_features, pad_if_not_divisible=True)[0]
+        return feats.keypoints, feats.descriptors, size
+
+    @torch.inference_mode()
+    def __call__(self, image0: np.ndarray, image1: np.ndarray) -> MethodOutput:
+        m = _methods()
+        if self._disk is None:
+            self._build()
+        m._sync()
+        start = time.perf_counter()
+        (k0, d0, size0), (k1, d1, size1) = self._features(image0), self._features(image1)
+        if len(k0) < 2 or len(k1) < 2:
+            xy0, xy1, scores = m._empty()
+        else:
+
+            def side(k: torch.Tensor, d: torch.Tensor, size: tuple[int, int]) -> dict[str, torch.Tensor]:
+                wh = torch.tensor([[size[1], size[0]]], dtype=k.dtype, device=k.device)
+                return {"keypoints": k[None], "descriptors": d[None], "image_size": wh}
+
+            out = self._lightglue({"image0": side(k0, d0, size0), "image1": side(k1, d1, size1)})
+            idx = out["matches"][0].cpu().numpy()
+            xy0 = to_original(_numpy(k0)[idx[:, 0]], size0, image0.shape[:2])
+            xy1 = to_original(_numpy(k1)[idx[:, 1]], size1, image1.shape[:2])
+            scores = 1.0 - _numpy(out["scores"][0]).reshape(-1)
+        m._sync()
+        return xy0, xy1, scores, time.perf_counter() - start
