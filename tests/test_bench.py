@@ -200,7 +200,7 @@ def test_method_specs():
         "hz+",
         {"descriptor": "tfeat", "max_keypoints": 500, "upright": True},
     )
-    assert methods.method_label("keynet:num_features=100") == "keynet_num_features-100"
+    assert methods.method_label("keynet:max_keypoints=100") == "keynet_max_keypoints-100"
     with pytest.raises(ConfigError):
         methods.parse_method_spec("superglue")
     with pytest.raises(ConfigError):

@@ -52,7 +52,7 @@ def test_hardnet_checkpoint_loads_from_weights_dir_and_torch_home(hardnet_home, 
 @pytest.mark.parametrize(
     ("name", "alternative"),
     [("hardnet", "--descriptor tfeat or rootsift"), ("affnet", "--shape baumberg"),
-     ("orinet", "--orientation gradient|upright")],
+     ("orinet", "--orientation gradient|upright"), ("keynet", "the hz+ or rootsift base pipelines")],
 )
 def test_missing_weights_raise_with_alternatives(tmp_path, no_network, name, alternative):
     with pytest.raises(WeightsNotFoundError, match="could not be downloaded") as err:
@@ -64,12 +64,14 @@ def test_missing_weights_raise_with_alternatives(tmp_path, no_network, name, alt
 def test_auto_descriptor_falls_back_to_rootsift_with_warning(tmp_path, no_network):
     name, warning = resolve_descriptor("auto", tmp_path)
     assert name == "rootsift"
-    assert "RootSIFT" in warning and "--descriptor tfeat or rootsift" in warning
+    assert "using rootsift instead" in warning and "--descriptor tfeat or rootsift" in warning
     assert resolve_descriptor("tfeat", tmp_path) == ("tfeat", None)
+    name, warning = resolve_descriptor("auto", tmp_path, fallback="tfeat")  # Key.Net's fallback
+    assert name == "tfeat" and "using tfeat instead" in warning
 
 
 def test_shared_weights_load(no_network):
-    for name in ("affnet", "orinet", "tfeat"):
+    for name in ("affnet", "orinet", "tfeat", "keynet"):
         if not is_cached(name):
             pytest.skip("needs ../shared/weights")
         assert not load_model(name).training

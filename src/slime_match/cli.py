@@ -18,12 +18,13 @@ logger = logging.getLogger("slime_match")
 def _add_match_options(parser: argparse.ArgumentParser) -> None:
     from .config import RANSAC_CHOICES
 
-    parser.add_argument("--method", default="slime", choices=["slime", "hz+", "rootsift"],
+    parser.add_argument("--method", default="slime", choices=["slime", "hz+", "rootsift", "keynet"],
                         help="Slime (default) or a base pipeline alone")
-    parser.add_argument("--base", default=None, choices=["hz+", "rootsift"],
+    parser.add_argument("--base", default=None, choices=["hz+", "rootsift", "keynet"],
                         help="base pipeline run inside Slime (default hz+)")
     parser.add_argument("--descriptor", default=None, choices=["auto", "hardnet", "tfeat", "rootsift"],
-                        help="Hz+ descriptor; auto = HardNet when its weights are available, else RootSIFT")
+                        help="Hz+ / Key.Net descriptor; auto = HardNet when its weights are available, else "
+                             "RootSIFT (Key.Net: TFeat)")
     parser.add_argument("--shape", default=None, choices=["affnet", "baumberg"], help="Hz+ affine shape")
     parser.add_argument("--orientation", default=None, choices=["orinet", "gradient", "upright"],
                         help="Hz+ patch orientation")

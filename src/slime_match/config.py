@@ -11,7 +11,7 @@ from .errors import ConfigError
 from .pipelines import BASE_NAMES, BaseConfig
 from .slime.pipeline import SlimeConfig
 
-METHODS = ("slime", "hz+", "rootsift")
+METHODS = ("slime", "hz+", "rootsift", "keynet")
 RANSAC_CHOICES = ("none", "homography", "fundamental", "magsac-homography", "magsac-fundamental",
                   "poselib-homography", "poselib-fundamental")
 
@@ -21,7 +21,7 @@ class MatchConfig:
     """Everything that defines a matching run.
 
     Attributes:
-        method: "slime" (Slime on top of ``base``), or a base pipeline alone: "hz+" / "rootsift".
+        method: "slime" (Slime on top of ``base``), or a base pipeline alone: "hz+" / "rootsift" / "keynet".
         base: the base pipeline options (for Slime: the pipeline run on blocks and tiles).
         slime: Slime's parameters (the paper's defaults).
         ransac: post-processing robust estimation: "none", "homography" / "fundamental" (the paper's
@@ -59,10 +59,14 @@ PRESETS: dict[str, dict[str, Any]] = {
     "slime": {"method": "slime", "base": "hz+"},
     "slime-upright": {"method": "slime", "base": "hz+", "upright": True},
     "slime-rootsift": {"method": "slime", "base": "rootsift"},
+    "slime-keynet": {"method": "slime", "base": "keynet"},
+    "slime-keynet-upright": {"method": "slime", "base": "keynet", "upright": True},
     "hz+": {"method": "hz+"},
     "hz+-upright": {"method": "hz+", "upright": True},
     "rootsift": {"method": "rootsift"},
     "rootsift-upright": {"method": "rootsift", "upright": True},
+    "keynet": {"method": "keynet"},
+    "keynet-upright": {"method": "keynet", "upright": True},
 }
 
 
@@ -70,7 +74,7 @@ def make_config(preset: str = "slime", **options: Any) -> MatchConfig:
     """Build a validated MatchConfig from a preset name and flat overrides.
 
     Flat keys are looked up on MatchConfig, then BaseConfig (``descriptor``, ``shape``, ``upright``...),
-    then SlimeConfig; ``base="rootsift"`` selects the base pipeline. Unknown keys raise ConfigError.
+    then SlimeConfig; ``base="rootsift"`` (or "keynet") selects the base pipeline. Unknown keys raise ConfigError.
     """
     if preset not in PRESETS:
         raise ConfigError(f"unknown method/preset {preset!r}: choose one of {', '.join(PRESETS)}")

@@ -45,8 +45,9 @@ class Matcher:
         self.device = resolve_device(self.config.device)
         self.warnings: list[str] = []
         base = self.config.base
-        if base.name == "hz+" and base.descriptor == "auto":
-            base.descriptor, warning = resolve_descriptor("auto", weights_dir=base.weights_dir)
+        if base.name in ("hz+", "keynet") and base.descriptor == "auto":
+            fallback = "tfeat" if base.name == "keynet" else "rootsift"  # Key.Net's patch descriptors are networks
+            base.descriptor, warning = resolve_descriptor("auto", weights_dir=base.weights_dir, fallback=fallback)
             if warning:
                 logger.warning(warning)
                 self.warnings.append(warning)

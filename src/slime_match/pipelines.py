@@ -1,4 +1,4 @@
-"""Base matching pipelines (Hz+ and RootSIFT) behind one interface.
+"""Base matching pipelines (Hz+, RootSIFT and Key.Net) behind one interface.
 
 A base pipeline turns an image into :class:`~slime_match.types.Features` and two feature sets into
 :class:`~slime_match.types.Matches`. Slime drives it through four calls:
@@ -7,7 +7,8 @@ A base pipeline turns an image into :class:`~slime_match.types.Features` and two
 * ``detect(context)`` -> features with their own orientation (or upright when configured so);
 * ``describe_fixed(context, features, angle)`` -> the same regions re-described under one fixed
   orientation (Slime's orientation-refined re-run, Sec. 3.3 of the paper);
-* ``match(f0, f1, size0, size1)`` -> candidate matches after the pipeline's own filter (DTM / FGINN).
+* ``match(f0, f1, size0, size1)`` -> candidate matches after the pipeline's own filter (DTM / FGINN /
+  AdaLAM).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import torch
 from .errors import ConfigError
 from .features.extractor import LocalFeatureExtractor, PatchConfig
 from .features.harrisz import HarrisZConfig, detect_harrisz
-from .features.laf import PatchPyramid
+from .features.laf import PatchPyramid, set_laf_angle
 from .io import to_tensor
 from .matching.blob import BlobConfig, blob_match
 from .matching.dtm import DTMConfig, dtm_filter
@@ -35,7 +36,7 @@ from .types import Features, Matches
 
 logger = logging.getLogger("slime_match")
 
-BASE_NAMES = ("hz+", "rootsift")
+BASE_NAMES = ("hz+", "rootsift", "keynet")
 
 CandidateFilter = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -45,11 +46,12 @@ class BaseConfig:
     """Options of a base pipeline.
 
     Attributes:
-        name: "hz+" (HarrisZ+ + AffNet + OriNet + descriptor + Blob matching + DTM) or "rootsift"
-            (OpenCV DoG + RootSIFT + FGINN, the paper's handcrafted baseline).
-        descriptor: Hz+ descriptor: "auto" | "hardnet" | "tfeat" | "rootsift".
-        shape: Hz+ affine shape: "affnet" | "baumberg".
-        orientation: Hz+ orientation: "orinet" | "gradient" | "upright".
+        name: "hz+" (HarrisZ+ + AffNet + OriNet + descriptor + Blob matching + DTM), "rootsift"
+            (OpenCV DoG + RootSIFT + FGINN, the paper's handcrafted baseline) or "keynet" (Key.Net + AffNet +
+            OriNet + HardNet/TFeat + AdaLAM, kornia's modules).
+        descriptor: Hz+ descriptor: "auto" | "hardnet" | "tfeat" | "rootsift" (Key.Net: "hardnet" | "tfeat").
+        shape: Hz+ affine shape: "affnet" | "baumberg" (Key.Net: "affnet").
+        orientation: Hz+ orientation: "orinet" | "gradient" | "upright" (Key.Net: "orinet" | "upright").
         upright: no orientation estimation at all (the paper's upright variants); overrides ``orientation``.
         max_keypoints: detector cap.
         magnification: patch magnification over the detector region (None = the extractor's default).
@@ -74,9 +76,16 @@ class BaseConfig:
 
 
 class BasePipeline:
-    """Interface of a base pipeline (see the module docstring)."""
+    """Interface of a base pipeline (see the module docstring).
+
+    Attributes:
+        slime_global_dtm: whether Slime ends with a global DTM over its matches on this base (the paper:
+            yes for Hz+ and RootSIFT; not for Key.Net, where a global AdaLAM is "mostly equivalent to running
+            the base Key.Net alone").
+    """
 
     name: str = "base"
+    slime_global_dtm: bool = True
 
     def prepare(self, image: np.ndarray) -> Any:
         raise NotImplementedError
@@ -261,6 +270,98 @@ class RootSiftPipeline(BasePipeline):
                 "fginn_radius": self.config.fginn_radius}
 
 
+@dataclass
+class KeyNetContext:
+    grey: torch.Tensor  # (1, 1, H, W) float luminance in [0, 1]
+
+
+class KeyNetPipeline(BasePipeline):
+    """Key.Net -> AffNet -> OriNet|upright -> HardNet|TFeat -> AdaLAM, composed of kornia's modules as
+    kornia's ``KeyNetAffNetHardNet`` + ``match_adalam`` (the paper's Key.Net pipeline).
+
+    Only filled detections are kept and shaped (kornia pads to ``max_keypoints`` with zero frames). AdaLAM
+    scores are its inverse local-RANSAC confidences. A ``candidate_filter`` (Slime's tile refinement) is
+    applied to AdaLAM's output: AdaLAM starts from every keypoint's nearest neighbour, so it cannot take a
+    pre-filtered candidate list.
+    """
+
+    name = "keynet"
+    slime_global_dtm = False
+
+    def __init__(self, config: BaseConfig, device: torch.device) -> None:
+        import kornia.feature as KF
+
+        from .features.weights import load_model
+
+        if config.descriptor not in ("hardnet", "tfeat"):
+            raise ConfigError(f"the keynet base pipeline describes with hardnet or tfeat, not {config.descriptor!r}")
+        if config.shape != "affnet":
+            raise ConfigError(f"the keynet base pipeline uses AffNet shapes, not {config.shape!r}")
+        upright = config.upright or config.orientation == "upright"
+        if not upright and config.orientation != "orinet":
+            raise ConfigError(f"the keynet base pipeline orients with orinet or upright, not {config.orientation!r}")
+        self.config, self.device, self.upright = config, device, upright
+        self.detector = KF.KeyNetDetector(False, num_features=config.max_keypoints)
+        self.detector.model = load_model("keynet", config.weights_dir)
+        self.detector = self.detector.to(device).eval()
+        self.affnet = load_model("affnet", config.weights_dir, device)
+        self.affnet.preserve_orientation = False  # upright affine frames; OriNet (or nothing) orients them
+        self.orienter = None if upright else KF.LAFOrienter(
+            angle_detector=load_model("orinet", config.weights_dir)).to(device).eval()
+        self.descriptor = KF.LAFDescriptor(load_model(config.descriptor, config.weights_dir), patch_size=32,
+                                           grayscale_descriptor=True).to(device).eval()
+
+    def prepare(self, image: np.ndarray) -> KeyNetContext:
+        grey = cv2.cvtColor(np.ascontiguousarray(image, dtype=np.float32), cv2.COLOR_RGB2GRAY)
+        return KeyNetContext(torch.from_numpy(grey)[None, None].to(self.device))
+
+    @torch.inference_mode()
+    def detect_regions(self, context: KeyNetContext) -> Features:
+        responses, lafs = self.detector.detect(context.grey)
+        filled = responses[0] > 0
+        lafs, response = lafs[:, filled], responses[0][filled]
+        shape = self.affnet(lafs, context.grey)[0] if len(response) else lafs[0]
+        return Features(shape, torch.zeros(len(shape), 0, device=shape.device), response, shape)
+
+    @torch.inference_mode()
+    def detect(self, context: KeyNetContext) -> Features:
+        regions = self.detect_regions(context)
+        if len(regions) == 0:
+            return _empty_features(128, self.device)
+        laf = regions.laf if self.orienter is None else self.orienter(regions.laf[None], context.grey)[0]
+        descriptors = self.descriptor(context.grey, laf[None])[0]
+        return Features(laf, descriptors, regions.response, regions.shape_laf)
+
+    @torch.inference_mode()
+    def describe_fixed(self, context: KeyNetContext, features: Features, angle: float) -> Features:
+        laf = set_laf_angle(features.shape_laf, angle)
+        if len(laf) == 0:
+            return _empty_features(128, self.device)
+        descriptors = self.descriptor(context.grey, laf[None])[0]
+        return Features(laf, descriptors, torch.zeros(len(laf), device=laf.device), features.shape_laf)
+
+    @torch.inference_mode()
+    def match(self, features0, features1, size0, size1, candidate_filter=None) -> Matches:
+        import kornia.feature as KF
+
+        if len(features0) < 2 or len(features1) < 2:
+            return Matches.empty()
+        dists, idx = KF.match_adalam(features0.descriptors, features1.descriptors, features0.laf[None],
+                                     features1.laf[None], hw1=tuple(size0), hw2=tuple(size1))
+        idx = idx.cpu().numpy()
+        matches = Matches(idx[:, 0], idx[:, 1], dists.reshape(-1).cpu().numpy())
+        if candidate_filter is not None and len(matches):
+            xy0 = features0.xy.detach().cpu().numpy().astype(np.float64)[matches.idx0]
+            xy1 = features1.xy.detach().cpu().numpy().astype(np.float64)[matches.idx1]
+            matches = matches.subset(candidate_filter(xy0, xy1))
+        return matches
+
+    def describe(self) -> dict[str, Any]:
+        return {"base": "keynet", "detector": "keynet", "shape": "affnet",
+                "orientation": "upright" if self.upright else "orinet", "descriptor": self.config.descriptor,
+                "matcher": "adalam", "max_keypoints": self.config.max_keypoints}
+
+
 def _upright_unique(keypoints) -> list:
     """Drop OpenCV's extra orientations of one DoG point and set every angle to 0."""
     seen, out = set(), []
@@ -284,7 +385,9 @@ def make_base_pipeline(config: BaseConfig, device: torch.device | str = "cpu") -
         return HzPlusPipeline(config, device)
     if config.name == "rootsift":
         return RootSiftPipeline(config, device)
+    if config.name == "keynet":
+        return KeyNetPipeline(config, device)
     raise ConfigError(f"unknown base pipeline {config.name!r}: choose one of {', '.join(BASE_NAMES)}")
 
 
-__all__ = ["BaseConfig", "BasePipeline", "HzPlusPipeline", "RootSiftPipeline", "make_base_pipeline"]
+__all__ = ["BaseConfig", "BasePipeline", "HzPlusPipeline", "KeyNetPipeline", "RootSiftPipeline", "make_base_pipeline"]

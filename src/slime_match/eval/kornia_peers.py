@@ -35,16 +35,21 @@ import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import cv2
 import numpy as np
 import torch
 
 from slime_match.errors import ConfigError, WeightsNotFoundError
-
-if TYPE_CHECKING:
-    from slime_match.eval.methods import MethodOutput
+from slime_match.eval.method_base import (
+    MethodOutput,
+    dataclass_from,
+    empty_output,
+    synchronize,
+    to_grey,
+    torch_device,
+)
 
 logger = logging.getLogger("slime_match")
 
@@ -55,13 +60,6 @@ LOFTR_WEIGHTS = ("outdoor", "indoor", "indoor_new")
 _NETWORK_ERRORS = (urllib.error.URLError, ConnectionError, TimeoutError, http.client.HTTPException)
 # kornia >= 0.8 wraps every failed source into one RuntimeError starting with this text.
 _KORNIA_ALL_FAILED = "Failed to load weights from"
-
-
-def _methods() -> Any:
-    """slime_match.eval.methods, imported on use so that methods.py can import this module at its top."""
-    from slime_match.eval import methods
-
-    return methods
 
 
 # --------------------------------------------------------------------------------------------- geometry
@@ -209,7 +207,7 @@ class KorniaLoFTR:
     """
 
     def __init__(self, **options: Any) -> None:
-        self.config = _methods()._dataclass_from(LoFTRConfig, options, "loftr")
+        self.config = dataclass_from(LoFTRConfig, options, "loftr")
         cfg = self.config
         if cfg.weights not in LOFTR_WEIGHTS:
             raise ConfigError(f"loftr weights must be one of {', '.join(LOFTR_WEIGHTS)}, got {cfg.weights!r}")
@@ -223,7 +221,7 @@ class KorniaLoFTR:
         from kornia.feature.loftr.loftr import default_cfg
 
         cfg = self.config
-        self.device = _methods()._device(cfg.device)
+        self.device = torch_device(cfg.device)
         config = copy.deepcopy(default_cfg)
         if cfg.threshold is not None:
             config["match_coarse"]["thr"] = float(cfg.threshold)
@@ -233,16 +231,15 @@ class KorniaLoFTR:
 
     def _prepare(self, image: np.ndarray) -> tuple[torch.Tensor, tuple[int, int]]:
         """(H, W, 3) RGB -> (1, 1, h, w) grey tensor on the device, and (h, w)."""
-        grey = _methods()._grey(image)
+        grey = to_grey(image)
         size = fit_size(*grey.shape, self.config.max_side, 8)
         return torch.from_numpy(resize_to(grey, size))[None, None].to(self.device), size
 
     @torch.inference_mode()
     def __call__(self, image0: np.ndarray, image1: np.ndarray) -> MethodOutput:
-        m = _methods()
         if self._model is None:
             self._build()
-        m._sync()
+        synchronize()
         start = time.perf_counter()
         (t0, size0), (t1, size1) = self._prepare(image0), self._prepare(image1)
         out = self._model({"image0": t0, "image1": t1})
@@ -250,7 +247,7 @@ class KorniaLoFTR:
         xy0 = to_original(_numpy(out["keypoints0"]) - 0.5, size0, image0.shape[:2])
         xy1 = to_original(_numpy(out["keypoints1"]) - 0.5, size1, image1.shape[:2])
         scores = 1.0 - _numpy(out["confidence"]).reshape(-1)
-        m._sync()
+        synchronize()
         return xy0, xy1, scores, time.perf_counter() - start
 
 
@@ -282,7 +279,7 @@ class KorniaDiskLightGlue:
     """
 
     def __init__(self, **options: Any) -> None:
-        self.config = _methods()._dataclass_from(DiskLightGlueConfig, options, "disk-lightglue")
+        self.config = dataclass_from(DiskLightGlueConfig, options, "disk-lightglue")
         cfg = self.config
         if (
             isinstance(cfg.num_features, bool)
@@ -302,7 +299,7 @@ class KorniaDiskLightGlue:
         import kornia.feature as KF
 
         cfg = self.config
-        self.device = _methods()._device(cfg.device)
+        self.device = torch_device(cfg.device)
         with _pretrained("DISK 'depth'"):
             disk = KF.DISK.from_pretrained("depth", device=torch.device("cpu"))
         params = {} if cfg.threshold is None else {"filter_threshold": float(cfg.threshold)}
@@ -320,14 +317,13 @@ class KorniaDiskLightGlue:
 
     @torch.inference_mode()
     def __call__(self, image0: np.ndarray, image1: np.ndarray) -> MethodOutput:
-        m = _methods()
         if self._disk is None:
             self._build()
-        m._sync()
+        synchronize()
         start = time.perf_counter()
         (k0, d0, size0), (k1, d1, size1) = self._features(image0), self._features(image1)
         if len(k0) < 2 or len(k1) < 2:
-            xy0, xy1, scores = m._empty()
+            xy0, xy1, scores = empty_output()
         else:
 
             def side(k: torch.Tensor, d: torch.Tensor, size: tuple[int, int]) -> dict[str, torch.Tensor]:
@@ -339,5 +335,5 @@ class KorniaDiskLightGlue:
             xy0 = to_original(_numpy(k0)[idx[:, 0]], size0, image0.shape[:2])
             xy1 = to_original(_numpy(k1)[idx[:, 1]], size1, image1.shape[:2])
             scores = 1.0 - _numpy(out["scores"][0]).reshape(-1)
-        m._sync()
+        synchronize()
         return xy0, xy1, scores, time.perf_counter() - start

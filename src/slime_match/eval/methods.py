@@ -21,36 +21,12 @@ from typing import Any
 
 import cv2
 import numpy as np
-import torch
 
 from slime_match.errors import ConfigError
+from slime_match.eval.kornia_peers import DiskLightGlueConfig, KorniaDiskLightGlue, KorniaLoFTR, LoFTRConfig
+from slime_match.eval.method_base import MethodFn, MethodOutput, dataclass_from, empty_output, to_grey
 
 logger = logging.getLogger("slime_match")
-
-MethodOutput = tuple[np.ndarray, np.ndarray, np.ndarray, float]
-MethodFn = Callable[[np.ndarray, np.ndarray], MethodOutput]
-
-
-def _device(name: str) -> torch.device:
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(name)
-
-
-def _sync() -> None:
-    """Wait for queued CUDA work so that timings are complete."""
-    if torch.cuda.is_available() and torch.cuda.is_initialized():
-        torch.cuda.synchronize()
-
-
-def _grey(image: np.ndarray) -> np.ndarray:
-    """(H, W, 3) float RGB in [0, 1] -> (H, W) float32 luminance."""
-    return cv2.cvtColor(np.ascontiguousarray(image, dtype=np.float32), cv2.COLOR_RGB2GRAY)
-
-
-def _empty() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
-
 
 class MatcherMethod:
     """A package preset ("slime", "hz+", "rootsift", ...) run through :class:`slime_match.Matcher`.
@@ -79,86 +55,6 @@ class MatcherMethod:
 
 
 @dataclass
-class KeyNetConfig:
-    """Key.Net + AffNet + OriNet + descriptor + AdaLAM (kornia).
-
-    Attributes:
-        num_features: Key.Net keypoints per image (kornia's KeyNetAffNetHardNet default).
-        upright: no OriNet (the paper's upright Key.Net).
-        descriptor: "hardnet" | "tfeat" | "auto" (HardNet when its weights are cached, else TFeat).
-        device: "auto" | "cpu" | "cuda".
-    """
-
-    num_features: int = 8000
-    upright: bool = False
-    descriptor: str = "auto"
-    device: str = "auto"
-
-
-class KeyNetAdaLAM:
-    """Key.Net + AffNet + OriNet + HardNet/TFeat + AdaLAM built from kornia modules.
-
-    Scores are the descriptor distances returned by AdaLAM.
-    """
-
-    def __init__(self, **options: Any) -> None:
-        self.config = _dataclass_from(KeyNetConfig, options, "keynet")
-        if self.config.descriptor not in ("auto", "hardnet", "tfeat"):
-            raise ConfigError(
-                f"keynet descriptor must be auto, hardnet or tfeat, got {self.config.descriptor!r}"
-            )
-        self._feature = None
-
-    def _build(self) -> None:
-        import kornia.feature as KF
-
-        from slime_match.features.weights import is_cached
-
-        cfg = self.config
-        descriptor = cfg.descriptor
-        if descriptor == "auto":
-            descriptor = "hardnet" if is_cached("hardnet") else "tfeat"
-            if descriptor == "tfeat":
-                logger.warning("keynet: HardNet weights not cached, using TFeat as the descriptor")
-        self.device = _device(cfg.device)
-        orienter = KF.PassLAF() if cfg.upright else KF.LAFOrienter(angle_detector=KF.OriNet(True))
-        detector = KF.KeyNetDetector(
-            True,
-            num_features=cfg.num_features,
-            ori_module=orienter,
-            aff_module=KF.LAFAffNetShapeEstimator(True, preserve_orientation=False).eval(),
-        )
-        patch = KF.HardNet(True) if descriptor == "hardnet" else KF.TFeat(True)
-        desc = KF.LAFDescriptor(patch, patch_size=32, grayscale_descriptor=True)
-        self._feature = KF.LocalFeature(detector, desc).to(self.device).eval()
-
-    @torch.inference_mode()
-    def __call__(self, image0: np.ndarray, image1: np.ndarray) -> MethodOutput:
-        import kornia.feature as KF
-
-        if self._feature is None:
-            self._build()
-        _sync()
-        start = time.perf_counter()
-        out = []
-        for image in (image0, image1):
-            tensor = torch.from_numpy(_grey(image))[None, None].to(self.device)
-            lafs, _, descs = self._feature(tensor)
-            out.append((lafs, descs[0], image.shape[:2]))
-        (laf0, d0, hw0), (laf1, d1, hw1) = out
-        if len(d0) < 2 or len(d1) < 2:
-            xy0, xy1, scores = _empty()
-        else:
-            dists, idx = KF.match_adalam(d0, d1, laf0, laf1, hw1=hw0, hw2=hw1)
-            idx = idx.cpu().numpy()
-            xy0 = laf0[0, idx[:, 0], :, 2].cpu().numpy().astype(np.float64)
-            xy1 = laf1[0, idx[:, 1], :, 2].cpu().numpy().astype(np.float64)
-            scores = dists.reshape(-1).cpu().numpy().astype(np.float64)
-        _sync()
-        return xy0, xy1, scores, time.perf_counter() - start
-
-
-@dataclass
 class SiftConfig:
     """OpenCV SIFT + Lowe's ratio test (a peer runnable offline).
 
@@ -175,7 +71,7 @@ class OpenCVSift:
     """OpenCV SIFT descriptors, brute-force 2-NN, ratio test; scores are the distance ratios."""
 
     def __init__(self, **options: Any) -> None:
-        self.config = _dataclass_from(SiftConfig, options, "opencv-sift")
+        self.config = dataclass_from(SiftConfig, options, "opencv-sift")
         if not 0 < self.config.ratio <= 1:
             raise ConfigError(f"opencv-sift ratio must be in (0, 1], got {self.config.ratio}")
 
@@ -183,12 +79,12 @@ class OpenCVSift:
         start = time.perf_counter()
         sift = cv2.SIFT_create(nfeatures=self.config.num_features)
         kd = [
-            sift.detectAndCompute(np.clip(_grey(im) * 255 + 0.5, 0, 255).astype(np.uint8), None)
+            sift.detectAndCompute(np.clip(to_grey(im) * 255 + 0.5, 0, 255).astype(np.uint8), None)
             for im in (image0, image1)
         ]
         (k0, d0), (k1, d1) = kd
         if d0 is None or d1 is None or len(d0) < 1 or len(d1) < 2:
-            xy0, xy1, scores = _empty()
+            xy0, xy1, scores = empty_output()
         else:
             knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(d0, d1, k=2)
             pairs = np.array([(m[0].queryIdx, m[0].trainIdx, m[0].distance, m[1].distance) for m in knn])
@@ -200,14 +96,6 @@ class OpenCVSift:
             xy1 = pts1[pairs[keep, 1].astype(np.int64)]
             scores = ratio[keep]
         return xy0, xy1, scores, time.perf_counter() - start
-
-
-def _dataclass_from(cls: type, options: dict[str, Any], what: str) -> Any:
-    names = set(cls.__dataclass_fields__)
-    bad = sorted(set(options) - names)
-    if bad:
-        raise ConfigError(f"unknown option(s) {bad} for {what}; valid: {sorted(names)}")
-    return cls(**options)
 
 
 def _preset(preset: str, **fixed: Any) -> Callable[..., MethodFn]:
@@ -223,9 +111,13 @@ REGISTRY: dict[str, tuple[str, Callable[..., MethodFn]]] = {
     "hz+-upright": ("Hz+ (upright)", _preset("hz+-upright")),
     "rootsift": ("RootSIFT", _preset("rootsift")),
     "rootsift-upright": ("RootSIFT (upright)", _preset("rootsift-upright")),
-    "keynet": ("Key.Net", lambda **o: KeyNetAdaLAM(**o)),
-    "keynet-upright": ("Key.Net (upright)", lambda **o: KeyNetAdaLAM(**{"upright": True, **o})),
+    "keynet": ("Key.Net", _preset("keynet")),
+    "keynet-upright": ("Key.Net (upright)", _preset("keynet-upright")),
+    "slime-keynet": ("Slimed Key.Net", _preset("slime-keynet")),
+    "slime-keynet-upright": ("Slimed Key.Net (upright)", _preset("slime-keynet-upright")),
     "opencv-sift": ("OpenCV SIFT", lambda **o: OpenCVSift(**o)),
+    "loftr": ("LoFTR", lambda **o: KorniaLoFTR(**o)),
+    "disk-lightglue": ("DISK + LightGlue", lambda **o: KorniaDiskLightGlue(**o)),
 }
 
 PAPER_METHODS = (
@@ -234,6 +126,8 @@ PAPER_METHODS = (
     "slime-rootsift",
     "keynet",
     "keynet-upright",
+    "slime-keynet",
+    "slime-keynet-upright",
     "hz+",
     "hz+-upright",
     "slime",
@@ -305,8 +199,10 @@ def make_method(spec: str, **defaults: Any) -> MethodFn:
 
 
 def _accepted(name: str) -> set[str]:
-    if name.startswith("keynet"):
-        return set(KeyNetConfig.__dataclass_fields__)
     if name == "opencv-sift":
         return set(SiftConfig.__dataclass_fields__)
+    if name == "loftr":
+        return set(LoFTRConfig.__dataclass_fields__)
+    if name == "disk-lightglue":
+        return set(DiskLightGlueConfig.__dataclass_fields__)
     return {"device", "seed"}

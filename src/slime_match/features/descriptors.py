@@ -37,12 +37,14 @@ class DescriptorConfig:
     batch_size: int = 256
 
 
-def resolve_descriptor(name: str, weights_dir: str | Path | None = None) -> tuple[str, str | None]:
+def resolve_descriptor(name: str, weights_dir: str | Path | None = None,
+                       fallback: str = "rootsift") -> tuple[str, str | None]:
     """Concrete descriptor for a name; "auto" is HardNet when its weights are cached or downloadable.
 
     Args:
         name: "auto" or one of :data:`DESCRIPTOR_METHODS`.
         weights_dir: see :func:`slime_match.features.weights.checkpoint_dir`.
+        fallback: the descriptor "auto" names (with a warning) when HardNet is unavailable.
 
     Returns:
         (descriptor name, warning text for the caller to record, or None).
@@ -56,7 +58,7 @@ def resolve_descriptor(name: str, weights_dir: str | Path | None = None) -> tupl
     try:
         load_state_dict("hardnet", weights_dir)  # downloads into the cache
     except WeightsNotFoundError as exc:
-        return "rootsift", f"descriptor 'auto': HardNet unavailable, using RootSIFT instead. {exc}"
+        return fallback, f"descriptor 'auto': HardNet unavailable, using {fallback} instead. {exc}"
     return "hardnet", None
 
 

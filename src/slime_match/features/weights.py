@@ -1,4 +1,4 @@
-"""Find and load the kornia network weights (AffNet, OriNet, HardNet, TFeat).
+"""Find and load the kornia network weights (AffNet, OriNet, HardNet, TFeat, Key.Net).
 
 Weights live in kornia's torch-hub cache, ``<TORCH_HOME>/hub/checkpoints`` (``torch.hub.get_dir()``), or in
 an explicit ``weights_dir`` (a torch-home-like folder with ``hub/checkpoints``, or the checkpoint folder
@@ -29,12 +29,13 @@ class _Spec:
     """Where a model's weights come from and how kornia loads them."""
 
     module: str  # kornia module holding the ``urls`` dict and the class
-    url_key: str
+    url_key: str  # key into the URLs dict ("" when the attribute is the URL list itself)
     cls: str
     file: str  # cache file name (basename of kornia's first URL)
     state_key: str | None  # checkpoint entry holding the state dict (None: the checkpoint is the state dict)
     strict: bool
     alternatives: str
+    urls_attr: str = "urls"  # module attribute holding the URLs (a dict indexed by url_key, or the URL list)
 
 
 SPECS: dict[str, _Spec] = {
@@ -53,6 +54,10 @@ SPECS: dict[str, _Spec] = {
     "orinet": _Spec(
         "kornia.feature.orientation", "orinet", "OriNet", "OriNet.pth", "state_dict", False,
         "--orientation gradient|upright",
+    ),
+    "keynet": _Spec(
+        "kornia.feature.keynet", "", "KeyNet", "keynet_pytorch.pth", "state_dict", True,
+        "the hz+ or rootsift base pipelines", urls_attr="KeyNet_URL",
     ),
 }
 
@@ -96,7 +101,7 @@ def load_state_dict(name: str, weights_dir: str | Path | None = None) -> dict:
     """Checkpoint of model ``name`` through kornia's downloader (cache hit, else download).
 
     Args:
-        name: "hardnet", "tfeat", "affnet" or "orinet".
+        name: "hardnet", "tfeat", "affnet", "orinet" or "keynet".
         weights_dir: see :func:`checkpoint_dir`.
 
     Returns:
@@ -108,7 +113,9 @@ def load_state_dict(name: str, weights_dir: str | Path | None = None) -> dict:
     spec = _spec(name)
     folder = checkpoint_dir(weights_dir)
     download = importlib.import_module("kornia.core.download")
-    urls = importlib.import_module(spec.module).urls[spec.url_key]
+    urls = getattr(importlib.import_module(spec.module), spec.urls_attr)
+    if spec.url_key:
+        urls = urls[spec.url_key]
     if not (folder / spec.file).is_file():
         logger.info("%s weights not in %s: trying to download them", name, folder)
     try:

@@ -23,7 +23,7 @@ from ..timing import StageTimer
 from .block_matching import BlockPairMatches, build_levels, match_block_pairs, torch_threads
 from .blocks import Block, BlockConfig, make_blocks, make_tiles
 from .planes import MatchTable, PlaneConfig, deduplicate, expand_planes
-from .refine import FlowGuide, global_dtm, match_tiles
+from .refine import FlowGuide, global_dtm, match_tiles, merge_duplicates
 from .tiles import (
     TileConfig,
     TileSets,
@@ -53,6 +53,9 @@ class SlimeConfig:
             (ours: the paper does not state a minimum; 4 would be any minimal sample).
         workers: processes for the block-pair matching (None = one per CPU core on CPU, 1 on CUDA).
         refine_tiles: run Sec. 3.8 (tile re-matching + global DTM); False stops at F^theta.
+        global_dtm: the final DTM on the union of F^theta and tile matches (Sec. 3.8); None: the base
+            pipeline's ``slime_global_dtm`` (the paper's Slimed Key.Net runs none). Exact duplicates are merged
+            either way.
         keep_stages: keep every stage's sets in the result (for ``slime viz`` / ``--save-stages``).
         shared_detection: detect and describe each block scale once on the whole scaled image, each block
             owning the keypoints of its core (ours, the sharing suggested by the paper's SM); False detects
@@ -68,6 +71,7 @@ class SlimeConfig:
     min_plane_matches: int = 8
     workers: int | None = None
     refine_tiles: bool = True
+    global_dtm: bool | None = None
     keep_stages: bool = False
     shared_detection: bool = True
     shared_tile_detection: bool = True
@@ -202,11 +206,14 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         all0 = np.vstack([guide_xy0, tile_xy0])
         all1 = np.vstack([guide_xy1, tile_xy1])
         all_scores = np.concatenate([table.score[in_ftheta], tile_scores])
-        if config.refine_tiles:
+        use_dtm = pipeline.slime_global_dtm if config.global_dtm is None else config.global_dtm
+        if config.refine_tiles and use_dtm:
             xy0, xy1, scores = global_dtm(all0, all1, all_scores, (h0, w0), (h1, w1), _keypoints(tile_levels0),
                                           _keypoints(tile_levels1),
                                           getattr(getattr(pipeline, "config", None), "dtm", None))
         else:
+            if config.refine_tiles:
+                all0, all1, all_scores = merge_duplicates(all0, all1, all_scores)
             order = np.argsort(all_scores, kind="stable")
             xy0, xy1, scores = all0[order], all1[order], all_scores[order]
     counts["final"] = len(xy0)

@@ -111,6 +111,15 @@ def match_tiles(
             np.concatenate(scores))
 
 
+def merge_duplicates(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                                                  np.ndarray]:
+    """Matches (K, 2), (K, 2), (K,) without exact duplicates (the best-scored one kept), in input order."""
+    order = np.argsort(scores, kind="stable")
+    _, first = np.unique(np.round(np.hstack([xy0, xy1])[order], 4), axis=0, return_index=True)
+    unique = np.sort(order[first])
+    return xy0[unique], xy1[unique], scores[unique]
+
+
 def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size1, keypoints0: np.ndarray,
                keypoints1: np.ndarray, config: DTMConfig | None = None) -> tuple[np.ndarray, np.ndarray,
                                                                                   np.ndarray]:
@@ -121,11 +130,7 @@ def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size
     """
     if len(xy0) == 0:
         return xy0, xy1, scores
-    rows = np.hstack([xy0, xy1])
-    order = np.argsort(scores, kind="stable")
-    _, first = np.unique(np.round(rows[order], 4), axis=0, return_index=True)
-    unique = np.sort(order[first])
-    xy0, xy1, scores = xy0[unique], xy1[unique], scores[unique]
+    xy0, xy1, scores = merge_duplicates(xy0, xy1, scores)
     keep = dtm_filter(xy0, xy1, scores, size0, size1, unmatched0=keypoints0, unmatched1=keypoints1,
                       config=config).keep
     order = np.argsort(scores[keep], kind="stable")
