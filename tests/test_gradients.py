@@ -14,7 +14,7 @@ from kornia.filters import spatial_gradient
 from slime_match.errors import ConfigError
 from slime_match.features.gradients import DominantGradientOrientation, SIFTPatchDescriptor, patch_gradients
 from slime_match.features.harrisz import HarrisZConfig, detect_harrisz
-from slime_match.features.inference import fuse_for_inference
+from slime_match.features.inference import _OneDnnRun, fuse_for_inference
 from slime_match.features.laf import PatchPyramid, ellipse_to_laf
 from slime_match.features.orientation import Orienter
 from slime_match.features.shape import ShapeEstimator
@@ -77,6 +77,8 @@ def test_fused_networks_equal_originals(name):
     net = load_model(name, None, "cpu")
     fused = fuse_for_inference(net)
     assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in fused.modules())
+    onednn_runs = [m for m in fused.modules() if isinstance(m, _OneDnnRun)]
+    assert len(onednn_runs) == (1 if torch.backends.mkldnn.is_available() else 0)
     x = _patches(300)
     with torch.inference_mode():
         if name == "affnet":

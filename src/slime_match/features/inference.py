@@ -74,9 +74,61 @@ def _fold_sequential(seq: nn.Sequential) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
+class _OneDnnConv2d(nn.Module):
+    """A convolution on oneDNN tensors (``Tensor.to_mkldnn``) with its weights reordered once for oneDNN."""
+
+    def __init__(self, conv: nn.Conv2d) -> None:
+        super().__init__()
+        self.padding, self.stride, self.dilation, self.groups = conv.padding, conv.stride, conv.dilation, conv.groups
+        weight = conv.weight.detach().contiguous().to_mkldnn()
+        self.weight = torch._C._nn.mkldnn_reorder_conv2d_weight(weight, self.padding, self.stride, self.dilation,
+                                                                 self.groups)
+        bias = conv.bias if conv.bias is not None else torch.zeros(conv.out_channels)
+        self.bias = bias.detach().contiguous().to_mkldnn()
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.mkldnn_convolution(x, self.weight, self.bias, self.padding, self.stride, self.dilation,
+                                        self.groups)
+
+
+class _OneDnnRun(nn.Module):
+    """Consecutive layers run in oneDNN's own tensor layout: one reorder in, one out, instead of one per layer
+    (TFeat's convolution + Tanh + max-pool stack: 1.5x faster per patch on CPU; outputs equal to ~1e-5)."""
+
+    def __init__(self, layers: list[nn.Module]) -> None:
+        super().__init__()
+        self.layers = nn.ModuleList(_OneDnnConv2d(m) if isinstance(m, nn.Conv2d) else m for m in layers)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        x = x.contiguous().to_mkldnn()
+        for layer in self.layers:
+            x = layer(x)
+        return x.to_dense()
+
+
+_ONEDNN_LAYERS = (nn.Conv2d, nn.ReLU, _InplaceTanh, nn.MaxPool2d)
+
+
+def _onednn_runs(seq: nn.Sequential) -> nn.Sequential:
+    """``seq`` with every maximal run of oneDNN-capable layers holding a convolution wrapped in a _OneDnnRun."""
+    layers: list[nn.Module] = []
+    run: list[nn.Module] = []
+    for m in [*seq, None]:
+        if m is not None and isinstance(m, _ONEDNN_LAYERS):
+            run.append(m)
+            continue
+        has_conv = any(isinstance(r, nn.Conv2d) for r in run)
+        layers += [_OneDnnRun(run)] if has_conv else run
+        run = []
+        if m is not None:
+            layers.append(m)
+    return nn.Sequential(*layers)
+
+
 @torch.no_grad()
 def fuse_for_inference(net: nn.Module) -> nn.Module:
-    """Eval-mode copy of ``net`` with every ``nn.Sequential`` child folded; channels-last weights on CPU.
+    """Eval-mode copy of ``net`` with every ``nn.Sequential`` child folded; on CPU, its convolution stacks run
+    in oneDNN's layout when PyTorch has oneDNN, else with channels-last weights.
 
     Args:
         net: a kornia patch network (its parameters' device decides the layout).
@@ -85,11 +137,14 @@ def fuse_for_inference(net: nn.Module) -> nn.Module:
         A new module with the same ``forward`` and outputs (to float rounding); ``net`` is untouched.
     """
     out = copy.deepcopy(net).eval()
+    param = next(out.parameters(), None)
+    cpu = param is not None and param.device.type == "cpu"
+    onednn = cpu and torch.backends.mkldnn.is_available()
     for name, child in list(out.named_children()):
         if isinstance(child, nn.Sequential):
-            setattr(out, name, _fold_sequential(child))
+            folded = _fold_sequential(child)
+            setattr(out, name, _onednn_runs(folded) if onednn else folded)
     out.requires_grad_(False)
-    param = next(out.parameters(), None)
-    if param is not None and param.device.type == "cpu":
+    if cpu and not onednn:
         out = out.to(memory_format=torch.channels_last)
     return out
