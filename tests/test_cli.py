@@ -125,8 +125,9 @@ def test_bad_input_one_line_error_no_output(pair, tmp_path, capsys, case):
 
 
 def test_bad_options_and_missing_gpu(pair, tmp_path, capsys):
-    with pytest.raises(SystemExit):
-        main(["match", *pair, "-o", str(tmp_path), "--descriptor", "sift2"])
+    for bad in (["--descriptor", "sift2"], ["--scales", "1,x"], ["--scales", "0,2"]):
+        with pytest.raises(SystemExit):
+            main(["match", *pair, "-o", str(tmp_path), *bad])
     code, _, err = _run(capsys, "match", *pair, "-o", tmp_path, "--threshold", "-1", "--method", "rootsift")
     assert code == 2 and "threshold" in err
     import torch

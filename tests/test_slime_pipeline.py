@@ -121,3 +121,13 @@ def test_slime_on_a_rotated_pair(graf_small):
     result = Matcher(make_config("slime", **WEIGHT_FREE))(a, b_rot)
     ok = correct_matches_homography(result.keypoints0, result.keypoints1, rot @ h)
     assert ok.sum() > 100 and ok.mean() >= 0.8, (int(ok.sum()), ok.mean())
+
+
+def test_fewer_block_scales(graf_small):
+    """The fast setting (block scales 1, 2: 8 blocks per image) matches the pair with fewer block pairs."""
+    a, b, h = graf_small
+    result = Matcher(make_config("slime", scales=(1, 2), **WEIGHT_FREE))(a, b)
+    assert result.summary["counts"]["block_pairs"] == 8 * 8
+    assert tuple(result.summary["config"]["slime"]["blocks"]["scales"]) == (1, 2)
+    ok = correct_matches_homography(result.keypoints0, result.keypoints1, h)
+    assert ok.sum() > 100 and ok.mean() >= 0.9, (int(ok.sum()), ok.mean())

@@ -36,11 +36,24 @@ def _add_match_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"])
     parser.add_argument("--weights-dir", default=None, help="folder with model weights (else TORCH_HOME cache)")
     parser.add_argument("--magnification", type=float, default=None, help="patch magnification over regions")
+    parser.add_argument("--scales", type=_scales, default=None,
+                        help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper; "
+                             "1,2 is about 2.5x faster, see the README)")
+
+
+def _scales(text: str) -> tuple[int, ...]:
+    try:
+        scales = tuple(int(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"scales must be comma-separated integers, got {text!r}") from None
+    if not scales or min(scales) < 1:
+        raise argparse.ArgumentTypeError(f"scales must be positive block counts, got {text!r}")
+    return scales
 
 
 def _options(args: argparse.Namespace) -> dict:
     keys = ("base", "descriptor", "shape", "orientation", "upright", "ransac", "threshold", "seed", "device",
-            "weights_dir", "magnification")
+            "weights_dir", "magnification", "scales")
     return {key: getattr(args, key) for key in keys}
 
 

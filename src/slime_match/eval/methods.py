@@ -107,6 +107,7 @@ REGISTRY: dict[str, tuple[str, Callable[..., MethodFn]]] = {
     "slime": ("Slimed Hz+", _preset("slime")),
     "slime-upright": ("Slimed Hz+ (upright)", _preset("slime-upright")),
     "slime-rootsift": ("Slimed RootSIFT", _preset("slime-rootsift")),
+    "slime-fast": ("Slimed Hz+ (block scales 1, 2)", _preset("slime-fast")),
     "hz+": ("Hz+", _preset("hz+")),
     "hz+-upright": ("Hz+ (upright)", _preset("hz+-upright")),
     "rootsift": ("RootSIFT", _preset("rootsift")),
