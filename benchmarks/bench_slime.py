@@ -2,6 +2,7 @@
 pair, and the shared vs per-block detection ablation; OpenCV SIFT as a same-process reference.
 
     python benchmarks/bench_slime.py [--out results/bench_slime.json] [--descriptor tfeat] [--skip-ablation]
+                                     [--skip-fast] [--skip-large]
     python benchmarks/bench_slime.py --device cuda --descriptor hardnet      # the GPU run
 
 Pairs: graf img1 -> img3 resized (cv2.INTER_AREA) to 640x480 and 1200x900; the GT homography is scaled with
@@ -10,6 +11,7 @@ the resize in the pixel-centre convention ``x_s = (x + 0.5) f - 0.5`` (per axis:
 Runs (each Slime run is timed once, after the base Hz+ on the same pair and config has warmed the models):
 * Slime, AffNet + OriNet + ``--descriptor`` (TFeat by default), at 640x480 and 1200x900;
 * weight-free Slime (Baumberg + gradient orientation + RootSIFT) at 640x480;
+* the ``slime-fast`` preset (block scales 1, 2 instead of the paper's 1, 2, 3), learned and weight-free, 640x480;
 * the ablation at 640x480 weight-free: shared detection (one per block scale, ours) vs per-block detection
   (each 256 px block crop on its own, the paper's prototype) -- same pair, same everything else;
 * OpenCV SIFT (8000 features) detect+describe of the same images.
@@ -160,11 +162,12 @@ def run_matcher(matcher: Matcher, pair: tuple[np.ndarray, np.ndarray, np.ndarray
     return record
 
 
-def bench_slime_vs_base(name: str, options: dict[str, Any], pair, device: str, target: float | None) -> dict:
-    """Base Hz+ (also the warm-up) then Slime with the same base options on one pair."""
+def bench_slime_vs_base(name: str, options: dict[str, Any], pair, device: str, target: float | None,
+                        preset: str = "slime") -> dict:
+    """Base Hz+ (also the warm-up) then Slime (``preset``) with the same base options on one pair."""
     base = run_matcher(Matcher(make_config("hz+", device=device, **options)), pair)
-    slime = run_matcher(Matcher(make_config("slime", device=device, **options)), pair)
-    out = {"options": options, "slime": slime, "base": base,
+    slime = run_matcher(Matcher(make_config(preset, device=device, **options)), pair)
+    out = {"preset": preset, "options": options, "slime": slime, "base": base,
            "slime_over_base_time": round(slime["wall_s"] / max(base["wall_s"], 1e-9), 2)}
     if target is not None:
         out["target_s"] = target
@@ -236,6 +239,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--out", default="results/bench_slime.json", help="JSON output path")
     parser.add_argument("--data", default=str(SHARED / "data"), help="folder holding oxford_graf/")
     parser.add_argument("--skip-large", action="store_true", help="skip the 1200x900 run")
+    parser.add_argument("--skip-fast", action="store_true", help="skip the slime-fast (block scales 1, 2) runs")
     parser.add_argument("--skip-ablation", action="store_true",
                         help="skip the per-block detection ablation (minutes on a CPU)")
     args = parser.parse_args(argv)
@@ -271,6 +275,12 @@ def main(argv: list[str] | None = None) -> dict:
     weight_free = bench_slime_vs_base("Slime weight-free (Baumberg + gradient + RootSIFT) 640x480", WEIGHT_FREE,
                                       pairs["640x480"], args.device, TARGETS_S["slime_weight-free_640x480"])
     runs["weight-free 640x480"] = weight_free
+    if not args.skip_fast:
+        for label, options, key in ((learned, {"descriptor": args.descriptor}, "slime_learned_640x480"),
+                                    ("weight-free", WEIGHT_FREE, "slime_weight-free_640x480")):
+            runs[f"fast (block scales 1, 2) {label} 640x480"] = bench_slime_vs_base(
+                f"Slime fast (block scales 1, 2) {label} 640x480", options, pairs["640x480"], args.device,
+                TARGETS_S[key], preset="slime-fast")
     if not args.skip_ablation:
         runs["ablation shared vs per-block detection, weight-free 640x480"] = bench_ablation(
             pairs["640x480"], args.device, weight_free["slime"])
