@@ -9,7 +9,9 @@
 # $OUT/predictions, so an interrupted run continues where it stopped and a rerun only recomputes metrics.
 # Environment: OUT (results folder, default results/full), DESCRIPTOR (Hz+/Slime/Key.Net descriptor: tfeat where
 # HardNet's weights are absent, as on the project machines; auto elsewhere), METHODS (';'-separated method
-# specs, default: the whole registry), TORCH_HOME (kornia weights).
+# specs, default: the registry but for slime-keynet(-upright), slime-fast, loftr and disk-lightglue, which
+# docs/results.md does not include yet: Slimed Key.Net takes ~1 min a pair here, the kornia peers need weights
+# the project machines lack; add them with METHODS="...;slime-keynet:descriptor=tfeat"), TORCH_HOME (kornia weights).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [[ -z "${TORCH_HOME:-}" && -d ../shared/weights ]]; then
