@@ -258,11 +258,7 @@ class RootSiftPipeline(BasePipeline):
             return Matches.empty()
         matches = match_fginn(features0.descriptors, features1.descriptors, features0.xy, features1.xy,
                               ratio=self.config.fginn_ratio, spatial_radius=self.config.fginn_radius)
-        if candidate_filter is not None and len(matches):
-            xy0 = features0.xy.detach().cpu().numpy().astype(np.float64)[matches.idx0]
-            xy1 = features1.xy.detach().cpu().numpy().astype(np.float64)[matches.idx1]
-            matches = matches.subset(candidate_filter(xy0, xy1))
-        return matches
+        return _filtered(matches, features0, features1, candidate_filter)
 
     def describe(self) -> dict[str, Any]:
         return {"base": "rootsift", "detector": "opencv-dog", "descriptor": "rootsift", "matcher": "fginn",
@@ -350,16 +346,22 @@ class KeyNetPipeline(BasePipeline):
                                      features1.laf[None], hw1=tuple(size0), hw2=tuple(size1))
         idx = idx.cpu().numpy()
         matches = Matches(idx[:, 0], idx[:, 1], dists.reshape(-1).cpu().numpy())
-        if candidate_filter is not None and len(matches):
-            xy0 = features0.xy.detach().cpu().numpy().astype(np.float64)[matches.idx0]
-            xy1 = features1.xy.detach().cpu().numpy().astype(np.float64)[matches.idx1]
-            matches = matches.subset(candidate_filter(xy0, xy1))
-        return matches
+        return _filtered(matches, features0, features1, candidate_filter)
 
     def describe(self) -> dict[str, Any]:
         return {"base": "keynet", "detector": "keynet", "shape": "affnet",
                 "orientation": "upright" if self.upright else "orinet", "descriptor": self.config.descriptor,
                 "matcher": "adalam", "max_keypoints": self.config.max_keypoints}
+
+
+def _filtered(matches: Matches, features0: Features, features1: Features,
+              candidate_filter: CandidateFilter | None) -> Matches:
+    """The matches that ``candidate_filter(xy0, xy1)`` keeps (all of them without a filter)."""
+    if candidate_filter is None or not len(matches):
+        return matches
+    xy0 = features0.xy.detach().cpu().numpy().astype(np.float64)[matches.idx0]
+    xy1 = features1.xy.detach().cpu().numpy().astype(np.float64)[matches.idx1]
+    return matches.subset(candidate_filter(xy0, xy1))
 
 
 def _upright_unique(keypoints) -> list:
