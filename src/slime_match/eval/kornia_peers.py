@@ -48,8 +48,8 @@ from slime_match.eval.method_base import (
     empty_output,
     synchronize,
     to_grey,
-    torch_device,
 )
+from slime_match.matcher import resolve_device
 
 logger = logging.getLogger("slime_match")
 
@@ -221,7 +221,7 @@ class KorniaLoFTR:
         from kornia.feature.loftr.loftr import default_cfg
 
         cfg = self.config
-        self.device = torch_device(cfg.device)
+        self.device = resolve_device(cfg.device)
         config = copy.deepcopy(default_cfg)
         if cfg.threshold is not None:
             config["match_coarse"]["thr"] = float(cfg.threshold)
@@ -299,7 +299,7 @@ class KorniaDiskLightGlue:
         import kornia.feature as KF
 
         cfg = self.config
-        self.device = torch_device(cfg.device)
+        self.device = resolve_device(cfg.device)
         with _pretrained("DISK 'depth'"):
             disk = KF.DISK.from_pretrained("depth", device=torch.device("cpu"))
         params = {} if cfg.threshold is None else {"filter_threshold": float(cfg.threshold)}

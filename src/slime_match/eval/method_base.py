@@ -20,13 +20,6 @@ MethodOutput = tuple[np.ndarray, np.ndarray, np.ndarray, float]
 MethodFn = Callable[[np.ndarray, np.ndarray], MethodOutput]
 
 
-def torch_device(name: str) -> torch.device:
-    """ "auto" (CUDA when available), "cpu" or "cuda" -> torch device."""
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(name)
-
-
 def synchronize() -> None:
     """Wait for queued CUDA work so that timings are complete."""
     if torch.cuda.is_available() and torch.cuda.is_initialized():

@@ -155,12 +155,14 @@ def markdown_tables(summary: dict[str, Any], agg: dict[str, Any]) -> str:
     methods, thresholds = list(summary["methods"]), summary["config"]["thresholds"]
     groups = [g for g in GROUPS if any(k[0] == g for k in agg["rows"])]
     counts = {g: next(v["pairs"] for k, v in agg["rows"].items() if k[0] == g) for g in groups}
-    head = ["Method", "RANSAC thr. (px)"] + [f"{g}: {HEADERS[c]}" for g in groups for c in COLUMNS]
-    sep = ["---"] * len(head)
 
-    def row(m: str, th: str) -> str:
+    def header(names) -> list[str]:
+        head = ["Method", "RANSAC thr. (px)"] + [f"{g}: {HEADERS[c]}" for g in names for c in COLUMNS]
+        return ["| " + " | ".join(head) + " |", "| " + " | ".join(["---"] * len(head)) + " |"]
+
+    def row(m: str, th: str, names=groups, table=agg["rows"]) -> str:
         cells = [method_title(summary["methods"][m]), _thr(th)]
-        cells += [_fmt(c, agg["rows"][(g, m, th)][c]) for g in groups for c in COLUMNS]
+        cells += [_fmt(c, table[(g, m, th)][c]) for g in names for c in COLUMNS]
         return "| " + " | ".join(cells) + " |"
 
     lines = [
@@ -169,37 +171,26 @@ def markdown_tables(summary: dict[str, Any], agg: dict[str, Any]) -> str:
         "",
         "### Main table (best RANSAC threshold per method)",
         "",
-        "| " + " | ".join(head) + " |",
-        "| " + " | ".join(sep) + " |",
+        *header(groups),
     ]
     lines += [row(m, agg["best"][m]) for m in methods]
     if agg["rotation_rows"]:
-        sub = {
-            g: next(v["pairs"] for k, v in agg["rotation_rows"].items() if k[0] == g) for g in ROTATION_GROUPS
-        }
-        rot_head = ["Method", "RANSAC thr. (px)"] + [
-            f"{g}: {HEADERS[c]}" for g in ROTATION_GROUPS for c in COLUMNS
-        ]
+        rotation = agg["rotation_rows"]
+        sub = {g: next(v["pairs"] for k, v in rotation.items() if k[0] == g) for g in ROTATION_GROUPS}
         lines += [
             "",
             "### Planar pairs: original vs rotated by the added rotations (best RANSAC threshold; "
             + ", ".join(f"{g} {n}" for g, n in sub.items())
             + " pairs)",
             "",
-            "| " + " | ".join(rot_head) + " |",
-            "| " + " | ".join(["---"] * len(rot_head)) + " |",
+            *header(ROTATION_GROUPS),
         ]
-        for m in methods:
-            th = agg["best"][m]
-            cells = [method_title(summary["methods"][m]), _thr(th)]
-            cells += [_fmt(c, agg["rotation_rows"][(g, m, th)][c]) for g in ROTATION_GROUPS for c in COLUMNS]
-            lines.append("| " + " | ".join(cells) + " |")
+        lines += [row(m, agg["best"][m], ROTATION_GROUPS, rotation) for m in methods]
     lines += [
         "",
         "### Detailed results (every RANSAC threshold; -- = no RANSAC)",
         "",
-        "| " + " | ".join(head) + " |",
-        "| " + " | ".join(sep) + " |",
+        *header(groups),
     ]
     lines += [row(m, th) for m in methods for th in thresholds]
     if agg["pose"]:
