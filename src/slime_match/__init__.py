@@ -8,6 +8,7 @@ Example:
 
 __version__ = "0.1.0"
 
+from . import openmp  # noqa: F401  (first: sets the OpenMP spin default before torch is loaded)
 from .config import MatchConfig, make_config
 from .errors import ConfigError, ImageError, SlimeMatchError, WeightsNotFoundError
 from .io import load_image
