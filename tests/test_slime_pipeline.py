@@ -15,8 +15,14 @@ from slime_match.io import load_image
 from slime_match.matcher import Matcher
 from slime_match.slime.block_matching import BlockPairMatches, orientation_bin, torch_threads
 from slime_match.slime.blocks import make_blocks
-from slime_match.slime.pipeline import block_planes_to_original
+from slime_match.slime.pipeline import (
+    MANY_BLOCK_PAIRS,
+    block_planes_to_original,
+    empty_result_reason,
+    layout_warning,
+)
 from slime_match.slime.refine import FlowGuide, global_dtm
+from slime_match.slime.tiles import TileConfig
 
 WEIGHT_FREE = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift"}
 
@@ -131,3 +137,32 @@ def test_fewer_block_scales(graf_small):
     assert tuple(result.summary["config"]["slime"]["blocks"]["scales"]) == (1, 2)
     ok = correct_matches_homography(result.keypoints0, result.keypoints1, h)
     assert ok.sum() > 100 and ok.mean() >= 0.9, (int(ok.sum()), ok.mean())
+
+
+def _counts(**values: int) -> dict[str, int]:
+    return {"block_planes": 5, "superset_H": 40, "epipolar_kept": 100, "ftheta_matches": 90, **values}
+
+
+def test_empty_result_reason_names_the_stage():
+    tiles = TileConfig()
+    assert "no block pair gave a plane" in empty_result_reason(_counts(block_planes=0), tiles)
+    # |H| (|H| - 1) ordered pairs of sets can never exceed 9 |H| votes when |H| <= 10
+    impossible = empty_result_reason(_counts(superset_H=10, epipolar_kept=0), tiles)
+    assert "cannot keep a match with only 10 tile match sets" in impossible and "out of 90" in impossible
+    assert "do not share one epipolar geometry" in empty_result_reason(_counts(superset_H=11, epipolar_kept=0), tiles)
+    assert "Sec. 3.7" in empty_result_reason(_counts(ftheta_matches=0), tiles)
+    assert "kept none of the 90" in empty_result_reason(_counts(), tiles)
+
+
+def test_layout_warning_only_for_many_block_pairs():
+    assert layout_warning(20, 20) is None
+    assert layout_warning(MANY_BLOCK_PAIRS, 1) is None
+    assert "4001 block pairs" in layout_warning(MANY_BLOCK_PAIRS + 1, 1)
+
+
+def test_empty_slime_result_says_why(graf_small):
+    """A 120 x 90 crop has one tile: the epipolar vote cannot pass, and the summary says so."""
+    a = graf_small[0][100:190, 100:220]
+    result = Matcher(make_config("slime", scales=(1,), **WEIGHT_FREE))(a, a)
+    assert len(result) == 0 and result.summary["counts"]["block_planes"] > 0
+    assert any("cannot keep a match" in w for w in result.summary["warnings"]), result.summary["warnings"]

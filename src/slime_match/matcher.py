@@ -61,9 +61,11 @@ class Matcher:
             array0, array1 = load_image(image0), load_image(image1)
         config = self.config
         stages = None
+        warnings = list(self.warnings)
         if config.method == "slime":
             output = run_slime(self.pipeline, array0, array1, config.slime, timer, seed=config.seed)
             xy0, xy1, scores, counts, stages = output.xy0, output.xy1, output.scores, output.counts, output.stages
+            warnings += output.warnings
         else:
             xy0, xy1, scores, counts = self._run_base(array0, array1, timer)
         inliers = model = kind = None
@@ -84,7 +86,7 @@ class Matcher:
             "image_sizes": {"image0": list(array0.shape[1::-1]), "image1": list(array1.shape[1::-1])},
             "counts": counts,
             "seconds": {**timer.as_dict(), "total": round(time.perf_counter() - start, 4)},
-            "warnings": list(self.warnings),
+            "warnings": warnings,
         }
         return MatchResult(xy0, xy1, scores, inliers, kind, model, summary, stages)
 

@@ -79,13 +79,46 @@ class SlimeConfig:
 
 @dataclass
 class SlimeOutput:
-    """Final matches (original px), counts per stage, and optionally every stage's arrays."""
+    """Final matches (original px), counts per stage, warnings (why a result is empty, slow layouts), and
+    optionally every stage's arrays."""
 
     xy0: np.ndarray
     xy1: np.ndarray
     scores: np.ndarray
     counts: dict[str, int]
     stages: dict[str, np.ndarray] | None
+    warnings: list[str] = field(default_factory=list)
+
+
+MANY_BLOCK_PAIRS = 4000  # 10x a 4:3 image pair's 400 at the paper's scales: warn, the run will be slow
+
+
+def layout_warning(n_blocks0: int, n_blocks1: int) -> str | None:
+    """A warning when the images (elongated ones: blocks follow the shorter side) give very many block pairs."""
+    if n_blocks0 * n_blocks1 <= MANY_BLOCK_PAIRS:
+        return None
+    return (f"{n_blocks0 * n_blocks1} block pairs ({n_blocks0} x {n_blocks1} blocks; a 4:3 pair has 400): blocks "
+            "follow each image's shorter side, so an elongated image makes Slime slow and memory-hungry; "
+            "fewer block scales (--scales 1,2) or the base pipeline alone (--method hz+) are much faster")
+
+
+def empty_result_reason(counts: dict[str, int], tiles: TileConfig) -> str:
+    """Which stage left no match, and why (paper Secs. 3.2-3.8), from the stage counts of ``run_slime``."""
+    if counts["block_planes"] == 0:
+        return ("no block pair gave a plane (Secs. 3.2-3.3: no homography RANSAC with enough inliers): the base "
+                "pipeline found too few consistent matches between any two blocks")
+    n_sets = counts["superset_H"]
+    if counts["epipolar_kept"] == 0:
+        if n_sets * (n_sets - 1) <= tiles.t_xi * n_sets:
+            return (f"the epipolar vote (Sec. 3.6) cannot keep a match with only {n_sets} tile match sets: it asks "
+                    f"for more than t_xi |H| = {tiles.t_xi:g} x {n_sets} agreeing fundamental matrices out of "
+                    f"{n_sets * (n_sets - 1)}; small images (few tiles) or scenes with few planes end here; "
+                    "the base pipeline alone (--method hz+) may still match them")
+        return (f"no match agreed with enough of the fundamental matrices of the {n_sets} tile match sets "
+                "(Sec. 3.6): the planes found do not share one epipolar geometry")
+    if counts["ftheta_matches"] == 0:
+        return "no tile match set survived plane fusion and the global orientation filter (Sec. 3.7)"
+    return f"the final global DTM (Sec. 3.8) kept none of the {counts['ftheta_matches']} plane and tile matches"
 
 
 def _scaling(blocks: list[Block], index: np.ndarray) -> np.ndarray:
@@ -166,6 +199,9 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     (h0, w0), (h1, w1) = image0.shape[:2], image1.shape[:2]
     blocks0, blocks1 = make_blocks(h0, w0, config.blocks), make_blocks(h1, w1, config.blocks)
     tiles0, tiles1 = make_tiles(h0, w0, config.blocks), make_tiles(h1, w1, config.blocks)
+    warnings = [w for w in (layout_warning(len(blocks0), len(blocks1)),) if w]
+    for warning in warnings:
+        logger.warning(warning)
     with timer("features"):
         shared = config.shared_detection
         levels0 = build_levels(pipeline, image0, blocks0, shared=shared)
@@ -217,11 +253,14 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
             order = np.argsort(all_scores, kind="stable")
             xy0, xy1, scores = all0[order], all1[order], all_scores[order]
     counts["final"] = len(xy0)
+    if not len(xy0):
+        warnings.append("Slime found no match: " + empty_result_reason(counts, config.tiles))
+        logger.warning(warnings[-1])
     stages = None
     if config.keep_stages:
         stages = _stage_arrays(blocks0, blocks1, tiles0, tiles1, bpm, raw_table, table, h, expanded, selected,
                                tile_xy0, tile_xy1, xy0, xy1)
-    return SlimeOutput(xy0, xy1, scores, counts, stages)
+    return SlimeOutput(xy0, xy1, scores, counts, stages, warnings)
 
 
 def _boxes_original(blocks: list[Block]) -> np.ndarray:
