@@ -40,6 +40,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+import slime_match  # noqa: F401  (first: its OpenMP spin default must be set before torch loads)
+
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
 if "TORCH_HOME" not in os.environ and (SHARED / "weights").is_dir():
