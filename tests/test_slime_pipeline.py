@@ -140,7 +140,8 @@ def test_fewer_block_scales(graf_small):
 
 
 def _counts(**values: int) -> dict[str, int]:
-    return {"block_planes": 5, "superset_H": 40, "epipolar_kept": 100, "ftheta_matches": 90, **values}
+    return {"block_planes": 5, "superset_H": 40, "epipolar_kept": 100, "ftheta_matches": 90, "tile_matches": 7,
+            **values}
 
 
 def test_empty_result_reason_names_the_stage():
@@ -151,7 +152,7 @@ def test_empty_result_reason_names_the_stage():
     assert "cannot keep a match with only 10 tile match sets" in impossible and "out of 90" in impossible
     assert "do not share one epipolar geometry" in empty_result_reason(_counts(superset_H=11, epipolar_kept=0), tiles)
     assert "Sec. 3.7" in empty_result_reason(_counts(ftheta_matches=0), tiles)
-    assert "kept none of the 90" in empty_result_reason(_counts(), tiles)
+    assert "kept none of the 90 plane matches and 7 tile matches" in empty_result_reason(_counts(), tiles)
 
 
 def test_layout_warning_only_for_many_block_pairs():

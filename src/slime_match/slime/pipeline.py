@@ -118,7 +118,8 @@ def empty_result_reason(counts: dict[str, int], tiles: TileConfig) -> str:
                 "(Sec. 3.6): the planes found do not share one epipolar geometry")
     if counts["ftheta_matches"] == 0:
         return "no tile match set survived plane fusion and the global orientation filter (Sec. 3.7)"
-    return f"the final global DTM (Sec. 3.8) kept none of the {counts['ftheta_matches']} plane and tile matches"
+    return (f"the final global DTM (Sec. 3.8) kept none of the {counts['ftheta_matches']} plane matches and "
+            f"{counts['tile_matches']} tile matches")
 
 
 def _scaling(blocks: list[Block], index: np.ndarray) -> np.ndarray:
