@@ -5,13 +5,13 @@
 #
 #   benchmarks/run_results.sh [extra slime-bench options, e.g. --device cuda]
 #
-# Slow on a CPU (Slime and Key.Net take tens of seconds per pair); resumable: predictions are cached in
+# Slow on a CPU (Slime and Slimed Key.Net take up to about a minute per pair); resumable: predictions are cached in
 # $OUT/predictions, so an interrupted run continues where it stopped and a rerun only recomputes metrics.
 # Environment: OUT (results folder, default results/full), DESCRIPTOR (Hz+/Slime/Key.Net descriptor: tfeat where
 # HardNet's weights are absent, as on the project machines; auto elsewhere), METHODS (';'-separated method
-# specs, default: the registry but for slime-keynet(-upright), slime-fast, loftr and disk-lightglue, which
-# docs/results.md does not include yet: Slimed Key.Net takes ~1 min a pair here, the kornia peers need weights
-# the project machines lack; add them with METHODS="...;slime-keynet:descriptor=tfeat"), TORCH_HOME (kornia weights).
+# specs, default: the paper's set and OpenCV SIFT; the registry's slime-fast, loftr and disk-lightglue are
+# left out: the kornia peers need weights the project machines lack, add them with
+# METHODS="...;loftr;disk-lightglue"), TORCH_HOME (kornia weights).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [[ -z "${TORCH_HOME:-}" && -d ../shared/weights ]]; then
@@ -20,7 +20,8 @@ fi
 OUT="${OUT:-results/full}"
 [[ -n "${METHODS:-}" ]] && METHODS_NOTE=", METHODS=$METHODS"
 D="${DESCRIPTOR:-tfeat}"
-ALL="rootsift;rootsift-upright;slime-rootsift;keynet:descriptor=$D;keynet-upright:descriptor=$D;hz+:descriptor=$D;hz+-upright:descriptor=$D"
+ALL="rootsift;rootsift-upright;slime-rootsift;keynet:descriptor=$D;keynet-upright:descriptor=$D"
+ALL="$ALL;slime-keynet:descriptor=$D;slime-keynet-upright:descriptor=$D;hz+:descriptor=$D;hz+-upright:descriptor=$D"
 METHODS="${METHODS:-$ALL;slime:descriptor=$D;slime-upright:descriptor=$D;opencv-sift}"
 CMD=(python -m slime_match.eval.bench graf hpatches scannet-sample motorcycle --rotations 90,180,270
      --thresholds none,5,3,2,1 --seed 0 --methods "$METHODS" -o "$OUT" "$@")
