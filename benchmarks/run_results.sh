@@ -5,8 +5,9 @@
 #
 #   benchmarks/run_results.sh [extra slime-bench options, e.g. --device cuda]
 #
-# Slow on a CPU (Slime and Slimed Key.Net take up to about a minute per pair); resumable: predictions are cached in
-# $OUT/predictions, so an interrupted run continues where it stopped and a rerun only recomputes metrics.
+# Slow on a CPU (Slime and Slimed Key.Net take up to about a minute per pair); resumable: predictions are
+# cached in $OUT/predictions, so an interrupted run continues where it stopped and a rerun only recomputes
+# metrics (about 10 min for the whole cache here).
 # Environment: OUT (results folder, default results/full), DESCRIPTOR (Hz+/Slime/Key.Net descriptor: tfeat where
 # HardNet's weights are absent, as on the project machines; auto elsewhere), METHODS (';'-separated method
 # specs, default: the paper's set and OpenCV SIFT; the registry's slime-fast, loftr and disk-lightglue are
