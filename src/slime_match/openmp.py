@@ -19,16 +19,10 @@ import sys
 SPIN_COUNT = "1000"
 
 
-def set_default_spin_count() -> bool:
-    """Set GOMP_SPINCOUNT to SPIN_COUNT unless torch is already loaded or the user chose a wait policy.
-
-    Returns:
-        True when the variable was set.
-    """
-    if "torch" in sys.modules or "GOMP_SPINCOUNT" in os.environ or "OMP_WAIT_POLICY" in os.environ:
-        return False
-    os.environ["GOMP_SPINCOUNT"] = SPIN_COUNT
-    return True
+def set_default_spin_count() -> None:
+    """Set GOMP_SPINCOUNT to SPIN_COUNT unless torch is already loaded or the user chose a wait policy."""
+    if "torch" not in sys.modules and "GOMP_SPINCOUNT" not in os.environ and "OMP_WAIT_POLICY" not in os.environ:
+        os.environ["GOMP_SPINCOUNT"] = SPIN_COUNT
 
 
 set_default_spin_count()

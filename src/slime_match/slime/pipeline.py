@@ -200,9 +200,15 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     (h0, w0), (h1, w1) = image0.shape[:2], image1.shape[:2]
     blocks0, blocks1 = make_blocks(h0, w0, config.blocks), make_blocks(h1, w1, config.blocks)
     tiles0, tiles1 = make_tiles(h0, w0, config.blocks), make_tiles(h1, w1, config.blocks)
-    warnings = [w for w in (layout_warning(len(blocks0), len(blocks1)),) if w]
-    for warning in warnings:
-        logger.warning(warning)
+    warnings: list[str] = []
+
+    def warn(message: str) -> None:
+        warnings.append(message)
+        logger.warning(message)
+
+    layout = layout_warning(len(blocks0), len(blocks1))
+    if layout:
+        warn(layout)
     with timer("features"):
         shared = config.shared_detection
         levels0 = build_levels(pipeline, image0, blocks0, shared=shared)
@@ -255,8 +261,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
             xy0, xy1, scores = all0[order], all1[order], all_scores[order]
     counts["final"] = len(xy0)
     if not len(xy0):
-        warnings.append("Slime found no match: " + empty_result_reason(counts, config.tiles))
-        logger.warning(warnings[-1])
+        warn("Slime found no match: " + empty_result_reason(counts, config.tiles))
     stages = None
     if config.keep_stages:
         stages = _stage_arrays(blocks0, blocks1, tiles0, tiles1, bpm, raw_table, table, h, expanded, selected,
