@@ -10,6 +10,7 @@ from scipy.spatial import Delaunay, cKDTree
 from slime_match.errors import ConfigError
 from slime_match.eval.metrics import correct_matches_homography
 from slime_match.matching import dtm as dtm_module
+from slime_match.matching import dtm_kernels
 from slime_match.matching.blob import blob_match
 from slime_match.matching.dtm import DTMConfig, DTMResult, dtm_filter
 
@@ -147,7 +148,11 @@ def test_greedy_survivors_matches_sequential_walk():
         if ref[u]:
             ref[b[(a == u) & alive[b]]] = False
     sel = alive[a] & alive[b]
-    np.testing.assert_array_equal(dtm_module._greedy_survivors(a[sel], b[sel], alive), ref)
+    order = np.argsort(rank)
+    order = order[alive[order]]
+    swap = g.uniform(size=sel.sum()) < 0.5  # the kernel takes the pairs in either order
+    a, b = np.where(swap, b[sel], a[sel]), np.where(swap, a[sel], b[sel])
+    np.testing.assert_array_equal(dtm_kernels.survivors(a, b, order, n), ref)
 
 
 def cross(u, v):
@@ -165,7 +170,7 @@ def test_delaunay_and_locate_match_scipy():
     assert len(tri.simplices) == len(ref.simplices) and area(tri.simplices).sum() == np.abs(area(ref.simplices)).sum()
     assert np.all(area(tri.simplices) > 0)  # counter-clockwise in x-right, y-down axes
     for q in (g.uniform(-0.5, 300.5, (2000, 2)), np.rint(g.uniform(-1, 301, (2000, 2)))):  # integer: on edges
-        found = dtm_module._locate(tri, q, cKDTree(pts).query(q)[1])
+        found = tri.locate(q, cKDTree(pts).query(q)[1])
         assert np.all(found >= 0)
         corners = pts[tri.simplices[found]]  # (P, 3, 2): q inside its triangle (barycentric test)
         lam = np.stack([cross(corners[:, (k + 1) % 3] - q, corners[:, (k + 2) % 3] - q) for k in range(3)], 1)
@@ -174,7 +179,25 @@ def test_delaunay_and_locate_match_scipy():
     t, k = np.nonzero(tri.neighbors >= 0)
     assert np.all((tri.neighbors[tri.neighbors[t, k]] == t[:, None]).any(1))
     far = np.array([[-50.0, 0.0], [400.0, 400.0]])
-    assert np.all(dtm_module._locate(tri, far, cKDTree(pts).query(far)[1]) == -1)
+    assert np.all(tri.locate(far, cKDTree(pts).query(far)[1]) == -1)
+
+
+def test_mesh_tables_against_triangle_list():
+    """Orientation, triangle neighbours, the per-point neighbour lists and the kept edges, from scipy's
+    triangles (whose orientation is arbitrary)."""
+    g = np.random.default_rng(5)
+    pts = np.unique(np.rint(g.uniform(0, 100, (120, 2))), axis=0)
+    simplices = Delaunay(pts).simplices.astype(np.int64)
+    simplices[::2] = simplices[::2, [0, 2, 1]]
+    kept = 70
+    neighbors, first, degree, adjacent, edges = dtm_kernels.mesh_tables(pts, simplices, kept)
+    assert np.all(cross(pts[simplices[:, 1]] - pts[simplices[:, 0]], pts[simplices[:, 2]] - pts[simplices[:, 0]]) > 0)
+    half = {(s[(k + 1) % 3], s[(k + 2) % 3]) for s in simplices.tolist() for k in range(3)}
+    assert {(p, q) for p in range(len(pts)) for q in adjacent[first[p]:first[p] + degree[p]]} == half
+    assert sorted(map(tuple, edges.tolist())) == sorted((p, q) for p, q in half if p < q < kept)
+    for t, k in zip(*np.nonzero(neighbors >= 0)):  # the neighbour shares the edge facing corner k
+        assert {simplices[t, (k + 1) % 3], simplices[t, (k + 2) % 3]} <= set(simplices[neighbors[t, k]])
+    assert (neighbors < 0).sum() == len(Delaunay(pts).convex_hull)
 
 
 def test_delaunay_reuse_matches_fresh_subdivisions():
@@ -200,14 +223,17 @@ def test_near_pairs_and_classify_match_brute_force():
                                    dtm_module._Delaunay((-1, -1), (size[1], size[0])))
     n, big = len(vertex), len(mesh.tri.points)
     adj = np.zeros((big, big), bool)
-    adj[mesh.tri.half_edges[:, 0], mesh.tri.half_edges[:, 1]] = True
+    tri = mesh.tri
+    for p in range(big):
+        adj[p, tri.adjacent[tri.first[p]:tri.first[p] + tri.degree[p]]] = True
     within_two = adj | (adj.astype(int) @ adj.astype(int) > 0) | np.eye(big, dtype=bool)
     near = adj | np.eye(big, dtype=bool)
     # units: 1 to 3 per kept vertex
     unit_point = np.repeat(np.arange(n), g.integers(1, 4, n))
     units = g.permutation(len(unit_point)) + 5  # arbitrary ids
     order = np.argsort(unit_point, kind="stable")
-    a, b = dtm_module._near_pairs(units[order], np.bincount(unit_point, minlength=n), mesh)
+    start = np.r_[0, np.bincount(unit_point, minlength=n).cumsum()]
+    a, b = dtm_kernels.near_unit_pairs(units[order], start, tri.edges)
     point_of = dict(zip(units, unit_point))
     got = {(min(x, y), max(x, y)) for x, y in zip(a, b)}
     assert len(got) == len(a)  # each pair once
@@ -215,7 +241,8 @@ def test_near_pairs_and_classify_match_brute_force():
                 if near[point_of[x], point_of[y]]}
     assert got == expected
     p, q = g.integers(0, n, (2, 3000))
-    is_near, is_far = dtm_module._classify(mesh, p, q)
+    kind = np.array([dtm_kernels.relation(i, j, tri.first, tri.degree, tri.adjacent) for i, j in zip(p, q)])
+    is_near, is_far = kind == dtm_kernels.NEAR, kind == dtm_kernels.FAR
     np.testing.assert_array_equal(is_near, near[p, q])
     np.testing.assert_array_equal(is_far, ~within_two[p, q])
 

@@ -27,14 +27,14 @@ candidates, ~6-20% correct, used to collapse to 2 matches):
   alive units (and does not remove them): the long tail of iterations removing a few units each costs
   most of the time and expansion restores the same final set.
 
-Implementation: everything is sparse and vectorised. Meshes come from OpenCV's incremental Delaunay
-(``Subdiv2D``, several times faster than Qhull on integer positions; one reused per image) and are only
-rebuilt when an image's vertex set changes. Contraction works on unordered unit pairs: the near pairs of
-each image are enumerated from its mesh edges and the units grouped by vertex, then classified in the
-other image with per-point bitsets of kept Delaunay neighbours (near: one bit; two edges apart: a bit of a
-neighbour). Expansion locates points by a vectorised visibility walk; a unit's test in an image only
-depends on the kept set, so a rejected unit is tested again only after the set grows, and image 1 only
-tests the units that image 0 accepts (its mesh is not built when none is).
+Implementation: meshes come from OpenCV's incremental Delaunay (``Subdiv2D``, several times faster than
+Qhull on integer positions; one reused per image) and are only rebuilt when an image's vertex set changes.
+Contraction works on unordered unit pairs: the near pairs of each image are enumerated from its mesh edges
+and the units grouped by vertex, then classified in the other image by walking Delaunay neighbours. Expansion
+locates points by a visibility walk; a unit's test in an image only depends on the kept set, so a rejected
+unit is tested again only after the set grows, and image 1 only tests the units that image 0 accepts (its
+mesh is not built when none is). The loops over points, triangles and unit pairs are compiled
+(``dtm_kernels``): the meshes are small and many, so numpy's per-call overhead would dominate.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ import math
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from functools import cached_property, lru_cache
+from functools import cache, cached_property, lru_cache
 
 import cv2
 import numpy as np
@@ -52,6 +52,8 @@ from scipy.spatial import cKDTree
 
 from ..errors import ConfigError
 from ..options import config_from_dict
+from .dtm_kernels import (contraction_step, insertion_order, locate, mesh_tables, neighbourhood_sums,
+                          ring_carved, transfer_test, triangle_corners, walk_tables)
 
 log = logging.getLogger("slime_match")
 _PARALLEL_MIN = 6000  # points (candidates + unmatched) from which both meshes are built in two threads
@@ -121,7 +123,7 @@ class _Delaunay:
         # a far bounding box keeps Subdiv2D's virtual outer vertices from shadowing hull triangles
         far = 50 * max(self.w, self.h)
         self.box = (x0 - far, self.y0 - far, self.w + 2 * far, self.h + 2 * far)
-        self.to_cell, self.first_cell = np.array([1, self.w]), x0 + self.w * self.y0
+        self.first_cell = x0 + self.w * self.y0
         self.index = np.empty(self.w * self.h, np.int64)  # cell -> point, only written cells read
         self.subdiv = cv2.Subdiv2D()
 
@@ -135,81 +137,51 @@ class _Delaunay:
         all collinear."""
         self.subdiv.initDelaunay(self.box)
         ip = points.astype(np.int64)
-        x = ip[:, 0]
         # insertion along a snake of horizontal strips keeps Subdiv2D's point location walks short
         strip = max(int(4 * math.sqrt(self.w * self.h / len(points))), 1)
-        row = (ip[:, 1] - self.y0) // strip
-        self.subdiv.insert(points[np.lexsort((np.where(row & 1, -x, x), row))])
-        self.index[ip @ self.to_cell - self.first_cell] = np.arange(len(points))
-        corners = self.subdiv.getTriangleList().reshape(-1, 2) @ self.to_cell
-        return self.index[corners.astype(np.int64) - self.first_cell].reshape(-1, 3)
+        self.subdiv.insert(points[insertion_order(ip, self.y0, strip)])
+        return triangle_corners(ip, self.subdiv.getTriangleList(), self.index, self.w, self.first_cell)
 
 
 @dataclass
 class _Triangulation:
-    """A planar Delaunay triangulation whose hull is the border ring (SciPy's ``Delaunay`` layout).
+    """A planar Delaunay triangulation whose hull is the border ring, with its tables
+    (``dtm_kernels.mesh_tables``).
 
     Attributes:
         points: (P, 2) float64 integer-valued vertex positions.
         simplices: (T, 3) int64 vertex indices, counter-clockwise in x-right, y-down pixel axes (positive
             cross product).
-        half_edges: (3 T, 2) directed Delaunay edges: every pair of neighbours once in each direction,
-            except along the hull, where only border vertices lie.
+        neighbors: (T, 3) triangle across the edge facing each corner, -1 on the hull.
+        first, degree, adjacent: (P,), (P,), (3 T,) the Delaunay neighbours of each point (CSR).
+        edges: (E, 2) undirected edges between kept points (the first ones), a < b.
     """
 
     points: np.ndarray
     simplices: np.ndarray
-    half_edges: np.ndarray
+    neighbors: np.ndarray
+    first: np.ndarray
+    degree: np.ndarray
+    adjacent: np.ndarray
+    edges: np.ndarray
 
     @classmethod
-    def of(cls, points: np.ndarray, delaunay: _Delaunay | None = None) -> _Triangulation:
-        """Triangulate unique integer-valued (P, 2) points, with ``delaunay`` if given."""
-        simp = (delaunay or _Delaunay.around(points))(points)
-        y = points[:, 1][simp]
-        flip = np.einsum("tk,tk->t", points[:, 0][simp], y[:, [1, 2, 0]] - y[:, [2, 0, 1]]) < 0  # twice the area
-        if flip.any():
-            simp[flip] = simp[flip][:, [0, 2, 1]]
-        # the edge facing corner k runs from corner k + 1 to corner k + 2
-        return cls(points, simp, simp[:, [1, 2, 2, 0, 0, 1]].reshape(-1, 2))
-
-    @cached_property
-    def neighbors(self) -> np.ndarray:
-        """(T, 3) triangle across the edge facing each corner, -1 on the hull."""
-        a, b = self.half_edges.T
-        # the twin of a half edge runs the other way in the neighbouring triangle
-        undirected = np.minimum(a, b) * len(self.points) + np.maximum(a, b)
-        order = undirected.argsort()
-        pair = (undirected[order[1:]] == undirected[order[:-1]]).nonzero()[0]
-        a, b = order[pair], order[pair + 1]
-        out = np.full(len(undirected), -1)
-        out[a], out[b] = b // 3, a // 3
-        return out.reshape(-1, 3)
+    def of(cls, points: np.ndarray, delaunay: _Delaunay | None = None, kept: int | None = None) -> _Triangulation:
+        """Triangulate unique integer-valued (P, 2) points, with ``delaunay`` if given; the first ``kept``
+        (default all) are kept points."""
+        simplices = (delaunay or _Delaunay.around(points))(points)
+        return cls(points, simplices, *mesh_tables(points, simplices, len(points) if kept is None else kept))
 
     @cached_property
     def walk(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Tables of ``_locate`` and ``_transfer_ok``, with an extra triangle T standing for the outside.
+        """Tables lines, across, start, proper of ``dtm_kernels.locate`` and ``transfer_test``."""
+        return walk_tables(self.points, self.simplices, self.neighbors)
 
-        Move 0 from a triangle stays in it, move k = 1, 2, 3 crosses the edge facing corner k - 1.
-
-        Returns:
-            lines: (T + 1, 4, 3) per triangle and move k, (a, b, c) with a x + b y + c twice the signed
-                area of the crossed edge and the point (x, y), >= 0 on the triangle's side (0 for move 0
-                and for triangle T, which thus holds every point).
-            across: (T + 1, 4) the triangle each move leads to, T when it leaves the hull.
-            start: (P,) a triangle at each point (the last one in ``simplices``).
-            proper: (T + 1,) the triangle has a positive area (False for triangle T, also read at index -1).
-        """
-        t = len(self.simplices)
-        x, y = self.points[:, 0][self.simplices], self.points[:, 1][self.simplices]
-        x1, y1, x2, y2 = x[:, [1, 2, 0]], y[:, [1, 2, 0]], x[:, [2, 0, 1]], y[:, [2, 0, 1]]  # edge facing k
-        lines = np.zeros((t + 1, 4, 3))
-        lines[:t, 1:, 0], lines[:t, 1:, 1], lines[:t, 1:, 2] = y1 - y2, x2 - x1, x1 * y2 - y1 * x2
-        across = np.full((t + 1, 4), t)
-        across[:t, 0] = np.arange(t)
-        across[:t, 1:] = np.where(self.neighbors < 0, t, self.neighbors)
-        start = np.empty(len(self.points), np.int64)
-        start[self.simplices.ravel()] = np.arange(t).repeat(3)
-        return lines, across, start, lines[:, :, 2].sum(1) > 0  # the constant terms sum to twice the area
+    def locate(self, q: np.ndarray, near: np.ndarray) -> np.ndarray:
+        """(Q,) index of the triangle containing each point q (Q, 2), -1 outside the hull, walking from the
+        point near (Q,) close to each. Exact on integer-valued queries."""
+        lines, across, start, _ = self.walk
+        return locate(lines, across, start, np.ascontiguousarray(q, np.float64), near)
 
 
 @dataclass
@@ -220,64 +192,12 @@ class _Mesh:
         tri: triangulation; points [0, n) are the kept vertices (``vertex`` ids), the rest are border.
         vertex: (n,) global vertex id of each non-border point, ascending.
         local: (V,) point index of each global vertex, -1 for those not kept.
-        edges: (E, 2) undirected Delaunay edges between non-border points (local indices, a < b).
     """
 
     tri: _Triangulation
     vertex: np.ndarray
     local: np.ndarray
-    edges: np.ndarray
     _affine: tuple[bytes, tuple[np.ndarray, np.ndarray]] | None = field(default=None, init=False, repr=False)
-
-    @cached_property
-    def adjacency(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
-        """Delaunay neighbours, border points included.
-
-        Returns:
-            neighbours: (3 T,) the neighbours of each point, grouped by point (CSR); first: (P,) start of
-            each point's group; degree: (P,) its size; bits, words: (P * words,) uint32, the kept vertices
-            among each point's neighbours as a bitset of ``words`` words (bit q % 32 of word q // 32).
-        """
-        n, size = len(self.vertex), len(self.tri.points)
-        src, dst = self.tri.half_edges.T
-        degree = np.bincount(src, minlength=size)
-        words = (n + 31) // 32
-        kept = dst < n
-        bits = np.zeros(size * words, np.uint32)
-        np.bitwise_or.at(bits, src[kept] * words + (dst[kept] >> 5),
-                         np.left_shift(np.uint32(1), (dst[kept] & 31).astype(np.uint32)))
-        return dst[src.argsort()], degree.cumsum() - degree, degree, bits, words
-
-    @cached_property
-    def near(self) -> tuple[np.ndarray, np.ndarray]:
-        """(E + n,) vertex pairs a, b whose units are near: the edges between kept vertices, then each
-        kept vertex with itself."""
-        n = len(self.vertex)
-        return np.concatenate([self.edges[:, 0], np.arange(n)]), np.concatenate([self.edges[:, 1], np.arange(n)])
-
-    @cached_property
-    def neighbourhoods(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The closed neighbourhoods of the kept vertices, for ``_local_affine``.
-
-        Returns:
-            w: (N,) member of each (centre, member) pair, grouped by centre; each group: the edges where
-                the centre is the first end, then those where it is the second, then the centre itself.
-            f: (N, 3) design row (w - centre, 1) of each pair.
-            first: (n,) start of each group.
-            mat: (n, 3, 3) ridge-regularised normal matrix of each group.
-        """
-        n = len(self.vertex)
-        src = self.tri.points[:n]
-        v = np.concatenate([self.edges[:, 0], self.edges[:, 1], np.arange(n)])
-        w = np.concatenate([self.edges[:, 1], self.edges[:, 0], np.arange(n)])
-        order = np.argsort(v, kind="stable")
-        v, w = v[order], w[order]
-        count = np.bincount(v, minlength=n)  # >= 1: every vertex is in its own neighbourhood
-        first = count.cumsum() - count
-        f = np.column_stack([src[w] - src[v], np.ones(len(v))])
-        mat = np.add.reduceat((f[:, :, None] * f[:, None, :]).reshape(-1, 9), first).reshape(n, 3, 3)
-        mat[:, [0, 1], [0, 1]] += _RIDGE
-        return w, f, first, mat
 
     def local_affine(self, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``_local_affine(self, dst)``, remembered for the last dst."""
@@ -327,104 +247,12 @@ def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int
     border = _border_ring(size, max(round(float(cfg.border_spacing * math.sqrt(w * h / max(n, 1)))), 1))
     if unmatched is not None:
         first_free = n + len(border)
-        s = delaunay(np.concatenate([pts, border, unmatched]))
-        ring_corners = s[((s >= n) & (s < first_free)).any(1)].ravel()
-        carved = np.zeros(len(unmatched), bool)
-        carved[ring_corners[ring_corners >= first_free] - first_free] = True
-        border = np.concatenate([border, unmatched[carved]])
-    tri = _Triangulation.of(np.concatenate([pts, border]), delaunay)
-    e = tri.half_edges
+        simplices = delaunay(np.concatenate([pts, border, unmatched]))
+        border = np.concatenate([border, unmatched[ring_carved(simplices, n, first_free, len(unmatched))]])
+    tri = _Triangulation.of(np.concatenate([pts, border]), delaunay, n)
     local = np.full(len(vertex_xy), -1, np.int64)
     local[vertex] = np.arange(n)
-    return _Mesh(tri, vertex, local, e[(e[:, 0] < e[:, 1]) & (e[:, 1] < n)])
-
-
-def _locate(tri: _Triangulation, q: np.ndarray, near: np.ndarray) -> np.ndarray:
-    """(P,) index of the triangle containing each query point, -1 outside the hull.
-
-    Vectorised visibility walk from a triangle at a vertex near each query (``tri.neighbors`` across the
-    edge facing the most negative barycentric coordinate); it terminates on Delaunay triangulations.
-    Exact on integer-valued queries.
-
-    Args:
-        q: (P, 2) query points; near: (P,) index of a vertex of ``tri`` close to each query.
-    """
-    lines, across, start, _ = tri.walk
-    qh = np.ones((len(q), 3))
-    qh[:, :2] = q
-    cur = start[near]
-    for _ in range(len(tri.simplices) + 1):
-        # the first smallest of (0, barycentric coordinates): stay when none is negative
-        move = np.einsum("pkj,pj->pk", lines.take(cur, 0), qh).argmin(1)
-        prev, cur = cur, across.take(4 * cur + move)
-        if cur.tobytes() == prev.tobytes():
-            break
-    return np.where((cur == prev) & (cur < len(tri.simplices)), cur, -1)
-
-
-def _near_pairs(grouped: np.ndarray, count: np.ndarray, mesh: _Mesh) -> tuple[np.ndarray, np.ndarray]:
-    """Unit pairs (a, b) near in this image: on one vertex (each pair once, a < b) or on the two ends of a
-    mesh edge.
-
-    Args:
-        grouped: (A,) the alive units, grouped by vertex in mesh order; count: (n,) their number on each
-            kept vertex (>= 1).
-
-    Returns:
-        a, b: (N,) unit ids.
-    """
-    start = count.cumsum() - count
-    va, vb = mesh.near
-    pairs = count[va] * count[vb]
-    pair_of = np.arange(len(va)).repeat(pairs)
-    offset = np.arange(len(pair_of)) - (pairs.cumsum() - pairs).repeat(pairs)
-    va, vb = va[pair_of], vb[pair_of]
-    a = grouped[start[va] + offset // count[vb]]
-    b = grouped[start[vb] + offset % count[vb]]
-    keep = (va != vb) | (a < b)
-    return a[keep], b[keep]
-
-
-def _classify(mesh: _Mesh, p: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Whether kept mesh points p and q (Q,) are near (one point or Delaunay neighbours) and whether they
-    are more than two Delaunay edges apart (paths through border points included): (Q,) bool each."""
-    neighbours, first, degree, bits, words = mesh.adjacency
-    near = (p == q) | ((bits[p * words + (q >> 5)] >> (q & 31)) & 1 == 1)
-    rest = (~near).nonzero()[0]
-    p, q = p[rest], q[rest]
-    swap = degree[p] > degree[q]
-    p, q = np.where(swap, q, p), np.where(swap, p, q)  # p: the end with fewer neighbours
-    d = degree[p]
-    path = np.arange(len(p)).repeat(d)  # every path p -> k -> q: k runs over the neighbours of p
-    k = neighbours[np.arange(len(path)) + (first[p] - (d.cumsum() - d)).repeat(d)]
-    q = q[path]
-    far = ~near
-    far[rest[path[(bits[k * words + (q >> 5)] >> (q & 31)) & 1 == 1]]] = False
-    return near, far
-
-
-def _greedy_survivors(a: np.ndarray, b: np.ndarray, alive: np.ndarray) -> np.ndarray:
-    """Units surviving the walk by rank where each surviving unit removes its inconsistent neighbours.
-
-    Vectorised in rounds with the same result as the sequential walk: a unit dies once a better-ranked
-    inconsistent neighbour is known to survive, and survives once all of them are known to die.
-
-    Args:
-        a, b: (E,) inconsistent unit pairs with rank[a] < rank[b] (a can remove b).
-        alive: (U,) units taking part.
-    """
-    state = np.where(alive, 0, -1).astype(np.int8)  # 0 undecided, 1 survives, -1 removed / absent
-    while True:
-        undecided_b = state[b] == 0
-        a, b = a[undecided_b], b[undecided_b]
-        if not len(b):
-            state[state == 0] = 1
-            return state == 1
-        threat = np.zeros(len(state), np.int8)  # per unit, 1 + the best state among its removers
-        np.maximum.at(threat, b, state[a] + 1)
-        undecided = state == 0
-        state[undecided & (threat == 2)] = -1  # a remover survives
-        state[undecided & (threat == 0)] = 1  # all removers are removed
+    return _Mesh(tri, vertex, local)
 
 
 def _local_affine(mesh: _Mesh, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -441,11 +269,11 @@ def _local_affine(mesh: _Mesh, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     n = len(dst)
     src = mesh.tri.points[:n]
     glob = np.linalg.lstsq(np.column_stack([src - src.mean(0), np.ones(n)]), dst, rcond=None)[0]
-    w, f, first, mat = mesh.neighbourhoods
-    rhs = np.add.reduceat((f[:, :, None] * dst[w][:, None, :]).reshape(-1, 6), first).reshape(n, 3, 2)
+    mat, rhs = neighbourhood_sums(src, mesh.tri.edges, dst)
+    mat[:, [0, 1], [0, 1]] += _RIDGE
     rhs[:, :2, :] += _RIDGE * glob[:2][None]
     sol = np.linalg.solve(mat, rhs)
-    return np.transpose(sol[:, :2, :], (0, 2, 1)), sol[:, 2, :]
+    return np.ascontiguousarray(np.transpose(sol[:, :2, :], (0, 2, 1))), np.ascontiguousarray(sol[:, 2, :])
 
 
 def _transfer_ok(mesh: _Mesh, dst_v: np.ndarray, q_src: np.ndarray, q_dst: np.ndarray,
@@ -463,21 +291,13 @@ def _transfer_ok(mesh: _Mesh, dst_v: np.ndarray, q_src: np.ndarray, q_dst: np.nd
     """
     tri, n = mesh.tri, len(mesh.vertex)
     nearest = mesh.tree.query(q_src)[1]
-    simplex = _locate(tri, q_src, nearest)
-    corners = tri.simplices[simplex]  # (P, 3), of the last triangle where none (-1): ignored
-    dst = dst_v.take(np.minimum(corners, n - 1), 0)  # (P, 3, 2)
-    x, y = dst[..., 0], dst[..., 1]
-    border = corners >= n
-    if border.any():
+    simplex = tri.locate(q_src, nearest)
+    if (tri.simplices[simplex[simplex >= 0]] >= n).any():
         affine, offset = mesh.local_affine(dst_v)
-        nearest = nearest[border.nonzero()[0]]
-        rel = tri.points[corners[border]] - tri.points[nearest]
-        predicted = offset[nearest] + np.einsum("kij,kj->ki", affine[nearest], rel)
-        x[border], y[border] = predicted[:, 0], predicted[:, 1]
-    ex, ey = x[:, [1, 2, 0]] - x, y[:, [1, 2, 0]] - y  # (P, 3) corner k -> corner k + 1
-    side = ex * (q_dst[:, 1:] - y) - ey * (q_dst[:, :1] - x)
-    return (tri.walk[3][simplex] & (ex[:, 0] * (y[:, 2] - y[:, 0]) > ey[:, 0] * (x[:, 2] - x[:, 0]))
-            & (side >= -tol * np.hypot(ex, ey)).all(1))
+    else:  # no border corner: the maps are not read
+        affine, offset = np.empty((0, 2, 2)), np.empty((0, 2))
+    return transfer_test(tri.points, tri.simplices, tri.walk[3], n, simplex, nearest, dst_v, affine, offset,
+                         np.ascontiguousarray(q_dst, np.float64), tol)
 
 
 def _vertices(xy: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -551,6 +371,16 @@ def dtm_filter(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0: tupl
     return DTMResult(units.alive[unit_of], removed_at[unit_of], restored[unit_of])
 
 
+@cache
+def load_kernels() -> None:
+    """Load DTM's compiled loops in this process (about 0.4 s from numba's on-disk cache, compiled there on
+    first use), once: call before forking workers that run DTM, or each of them pays it."""
+    g = np.random.default_rng(0)
+    xy = g.uniform(0, 64, (40, 2))
+    dtm_filter(xy, xy + g.normal(0, 8, xy.shape), g.uniform(size=40), (64, 64), (64, 64),
+               g.uniform(0, 64, (10, 2)), g.uniform(0, 64, (10, 2)))
+
+
 class _Units:
     """The distinct (vertex 0, vertex 1) pairs of the candidates and their alive flags.
 
@@ -604,33 +434,13 @@ class _Units:
         removed_at = np.full(n_units, -1, np.int64)
         iteration = 0
         while iteration < self.cfg.max_iterations and self.alive.any():
-            mesh = self.meshes()
-            point = [mesh[s].local[self.uv[s]] for s in (0, 1)]  # (U,) mesh point of each alive unit
-            inconsistent, consistent = [], None
-            for s in (0, 1):
-                grouped = self.grouped(s)
-                a, b = _near_pairs(grouped, np.bincount(point[s][grouped], minlength=len(mesh[s].vertex)),
-                                   mesh[s])
-                near, far = _classify(mesh[1 - s], point[1 - s][a], point[1 - s][b])
-                inconsistent.append((a[far], b[far]))
-                if s == 0:
-                    consistent = a[near], b[near]
-            (a0, b0), (a1, b1) = inconsistent
-            a, b = np.concatenate([a0, a1]), np.concatenate([b0, b1])
-            ca, cb = consistent
-            n_consistent = np.bincount(np.concatenate([ca, cb]), minlength=n_units)
-            units = self.alive.nonzero()[0]
-            rank = np.empty(n_units, np.int64)  # among the alive units
-            rank[units[np.lexsort((self.score[units], -n_consistent[units]))]] = np.arange(len(units))
-            swap = rank[b] < rank[a]
-            survive = _greedy_survivors(np.where(swap, b, a), np.where(swap, a, b), self.alive)
-            both = survive[ca] & survive[cb]
-            supported = np.zeros(n_units, bool)
-            supported[ca[both]] = True
-            supported[cb[both]] = True
-            removed = self.alive & ~(survive & supported)
+            m0, m1 = self.meshes()
+            removed = contraction_step(self.alive, self.score, m0.local[self.uv[0]], m1.local[self.uv[1]],
+                                       *self.by_vertex, m0.tri.edges, m1.tri.edges, len(m0.vertex),
+                                       len(m1.vertex), m0.tri.first, m0.tri.degree, m0.tri.adjacent,
+                                       m1.tri.first, m1.tri.degree, m1.tri.adjacent)
             n_removed = np.count_nonzero(removed)
-            if not n_removed or n_removed < self.cfg.settle_fraction * len(units):
+            if not n_removed or n_removed < self.cfg.settle_fraction * np.count_nonzero(self.alive):
                 break
             removed_at[removed] = iteration
             self.alive &= ~removed

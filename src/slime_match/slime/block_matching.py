@@ -24,6 +24,7 @@ import numpy as np
 import torch
 
 from ..features.laf import set_laf_angle
+from ..matching.dtm import load_kernels
 from ..geometry.ransac import HomographyRansacConfig, ransac_homography_many
 from ..pipelines import BasePipeline
 from ..types import Features, Matches
@@ -266,6 +267,8 @@ def match_pairs(pipeline: BasePipeline, pairs: list[tuple[int, int]], get0: Pair
                 blocks0: list[Block], blocks1: list[Block], workers: int = 1) -> list[Matches]:
     """The base pipeline on many block pairs, in ``workers`` forked processes (see ``fork_map``) when > 1."""
     workers = workers if len(pairs) >= 4 * workers else 1
+    if workers > 1:
+        load_kernels()
     return fork_map(lambda k: _match_one(pipeline, pairs[k], get0, get1, blocks0, blocks1), len(pairs), workers,
                     8 * workers)
 

@@ -1,0 +1,383 @@
+"""Compiled loops of DTM (numba): Delaunay mesh tables, one contraction step, point location and the
+transfer test of expansion.
+
+DTM runs on meshes of a few hundred vertices, thousands of times per Slime run. In numpy each of its steps is
+dozens of calls on tiny arrays, and the call overhead dominates; here each step is one pass. All tests are
+exact: positions are integers.
+
+Conventions: a mesh has P points, the first n of them kept vertices and the others border points; triangles
+are (T, 3) point indices; each point's Delaunay neighbours are a CSR list ``first``, ``degree``, ``adjacent``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_compiled = njit(cache=True, nogil=True)
+
+NEAR, APART, FAR = 0, 1, 2  # relations of two kept mesh points, see ``relation``
+
+
+@_compiled
+def insertion_order(ip, y0, strip):
+    """(P,) order of integer points ip (P, 2) along a snake of horizontal strips ``strip`` px high from y0:
+    strips top to bottom, x ascending in even strips and descending in odd ones, ties by index."""
+    span = 1
+    for i in range(len(ip)):
+        span = max(span, abs(ip[i, 0]) + 1)
+    key = np.empty(len(ip), np.int64)
+    for i in range(len(ip)):
+        row = (ip[i, 1] - y0) // strip
+        key[i] = row * (2 * span + 1) + (-ip[i, 0] if row & 1 else ip[i, 0]) + span
+    return np.argsort(key, kind="mergesort")
+
+
+@_compiled
+def triangle_corners(ip, triangles, index, width, first_cell):
+    """(T, 3) point index of each corner of an OpenCV Subdiv2D triangle list (T, 6) of the points ip (P, 2).
+
+    ``index`` is scratch space with a cell for every position: cell y * width + x - first_cell.
+    """
+    for i in range(len(ip)):
+        index[ip[i, 1] * width + ip[i, 0] - first_cell] = i
+    out = np.empty((len(triangles), 3), np.int64)
+    for t in range(len(triangles)):
+        for k in range(3):
+            out[t, k] = index[np.int64(triangles[t, 2 * k + 1]) * width + np.int64(triangles[t, 2 * k]) - first_cell]
+    return out
+
+
+@_compiled
+def ring_carved(simplices, n, first_free, n_free):
+    """(n_free,) whether each free point (indices first_free...) shares a triangle with a ring point
+    (indices n to first_free - 1)."""
+    out = np.zeros(n_free, np.bool_)
+    for t in range(len(simplices)):
+        touches = False
+        for k in range(3):
+            touches |= n <= simplices[t, k] < first_free
+        if touches:
+            for k in range(3):
+                if simplices[t, k] >= first_free:
+                    out[simplices[t, k] - first_free] = True
+    return out
+
+
+@_compiled
+def mesh_tables(points, simplices, n):
+    """Orient the triangles (in place) and build the tables of a triangulation.
+
+    Args:
+        points: (P, 2) float64 integer-valued positions; simplices: (T, 3) int64, made counter-clockwise in
+            x-right, y-down axes (positive cross product); n: the first n points are kept vertices.
+
+    Returns:
+        neighbors: (T, 3) triangle across the edge facing each corner, -1 on the hull.
+        first, degree: (P,) start and size of each point's group in ``adjacent``.
+        adjacent: (3 T,) the Delaunay neighbours of every point, grouped by point.
+        edges: (E, 2) undirected edges between kept vertices, a < b < n.
+    """
+    n_tri, n_pts = len(simplices), len(points)
+    for t in range(n_tri):
+        a, b, c = simplices[t, 0], simplices[t, 1], simplices[t, 2]
+        if ((points[b, 0] - points[a, 0]) * (points[c, 1] - points[a, 1])
+                < (points[b, 1] - points[a, 1]) * (points[c, 0] - points[a, 0])):
+            simplices[t, 1], simplices[t, 2] = c, b
+    # the edge facing corner k runs from corner k + 1 to corner k + 2; its twin runs the other way
+    key = np.empty(3 * n_tri, np.int64)
+    degree = np.zeros(n_pts, np.int64)
+    n_edges = 0
+    for t in range(n_tri):
+        for k in range(3):
+            a, b = simplices[t, (k + 1) % 3], simplices[t, (k + 2) % 3]
+            key[3 * t + k] = min(a, b) * n_pts + max(a, b)
+            degree[a] += 1
+            if a < b < n:
+                n_edges += 1
+    order = np.argsort(key)
+    neighbors = np.full((n_tri, 3), -1, np.int64)
+    for j in range(len(order) - 1):
+        e, f = order[j], order[j + 1]
+        if key[e] == key[f]:
+            neighbors[e // 3, e % 3] = f // 3
+            neighbors[f // 3, f % 3] = e // 3
+    first = np.cumsum(degree) - degree
+    fill = first.copy()
+    adjacent = np.empty(3 * n_tri, np.int64)
+    edges = np.empty((n_edges, 2), np.int64)
+    n_edges = 0
+    for t in range(n_tri):
+        for k in range(3):
+            a, b = simplices[t, (k + 1) % 3], simplices[t, (k + 2) % 3]
+            adjacent[fill[a]] = b
+            fill[a] += 1
+            if a < b < n:
+                edges[n_edges, 0], edges[n_edges, 1] = a, b
+                n_edges += 1
+    return neighbors, first, degree, adjacent, edges
+
+
+@_compiled
+def walk_tables(points, simplices, neighbors):
+    """Tables of ``locate`` and ``transfer_test``, with an extra triangle T standing for the outside.
+
+    Move 0 from a triangle stays in it, move k = 1, 2, 3 crosses the edge facing corner k - 1.
+
+    Returns:
+        lines: (T + 1, 4, 3) per triangle and move k, (a, b, c) with a x + b y + c twice the signed area of
+            the crossed edge and the point (x, y), >= 0 on the triangle's side (0 for move 0 and for
+            triangle T, which thus holds every point).
+        across: (T + 1, 4) the triangle each move leads to, T when it leaves the hull.
+        start: (P,) a triangle at each point (the last one in ``simplices``).
+        proper: (T + 1,) the triangle has a positive area (False for triangle T).
+    """
+    n_tri = len(simplices)
+    lines = np.zeros((n_tri + 1, 4, 3))
+    across = np.full((n_tri + 1, 4), n_tri, np.int64)
+    start = np.empty(len(points), np.int64)
+    proper = np.zeros(n_tri + 1, np.bool_)
+    for t in range(n_tri):
+        across[t, 0] = t
+        twice_area = 0.0
+        for k in range(3):
+            p1, p2 = simplices[t, (k + 1) % 3], simplices[t, (k + 2) % 3]
+            x1, y1, x2, y2 = points[p1, 0], points[p1, 1], points[p2, 0], points[p2, 1]
+            lines[t, k + 1, 0], lines[t, k + 1, 1], lines[t, k + 1, 2] = y1 - y2, x2 - x1, x1 * y2 - y1 * x2
+            twice_area += x1 * y2 - y1 * x2
+            if neighbors[t, k] >= 0:
+                across[t, k + 1] = neighbors[t, k]
+            start[simplices[t, k]] = t
+        proper[t] = twice_area > 0
+    return lines, across, start, proper
+
+
+@_compiled
+def locate(lines, across, start, q, near):
+    """(Q,) index of the triangle containing each query point q (Q, 2), -1 outside the hull.
+
+    Visibility walk from a triangle at the point near[i] close to each query, across the edge facing the
+    most negative barycentric coordinate; it terminates on Delaunay triangulations.
+    """
+    outside = len(lines) - 1
+    out = np.full(len(q), -1, np.int64)
+    for i in range(len(q)):
+        cur = start[near[i]]
+        x, y = q[i, 0], q[i, 1]
+        for _ in range(len(lines)):
+            move, lowest = 0, 0.0
+            for k in range(1, 4):
+                value = lines[cur, k, 0] * x + lines[cur, k, 1] * y + lines[cur, k, 2]
+                if value < lowest:
+                    move, lowest = k, value
+            if move == 0 or across[cur, move] == cur:
+                if cur < outside:
+                    out[i] = cur
+                break
+            cur = across[cur, move]
+    return out
+
+
+@_compiled
+def transfer_test(points, simplices, proper, n, simplex, nearest, dst_v, affine, offset, q_dst, tol):
+    """Whether each q_dst lies in the image of the triangle ``simplex`` that contains its source point.
+
+    The image of a triangle maps kept corners to dst_v and border corners by the local affine map of the
+    kept vertex nearest the source point; it must have a positive orientation, and each side may miss q_dst
+    by ``tol`` px.
+
+    Args:
+        simplex: (Q,) triangle of each query, -1 for none; nearest: (Q,) kept vertex nearest each source.
+        dst_v: (n, 2) position in the other image of each kept vertex.
+        affine, offset: (n, 2, 2), (n, 2) local affine maps (read only at border corners).
+        q_dst: (Q, 2) query positions in the other image.
+
+    Returns:
+        (Q,) bool.
+    """
+    out = np.zeros(len(simplex), np.bool_)
+    x, y = np.empty(3), np.empty(3)
+    for i in range(len(simplex)):
+        s = simplex[i]
+        if s < 0 or not proper[s]:
+            continue
+        for k in range(3):
+            c = simplices[s, k]
+            if c < n:
+                x[k], y[k] = dst_v[c, 0], dst_v[c, 1]
+            else:
+                v = nearest[i]
+                rx, ry = points[c, 0] - points[v, 0], points[c, 1] - points[v, 1]
+                x[k] = offset[v, 0] + (affine[v, 0, 0] * rx + affine[v, 0, 1] * ry)
+                y[k] = offset[v, 1] + (affine[v, 1, 0] * rx + affine[v, 1, 1] * ry)
+        if not (x[1] - x[0]) * (y[2] - y[0]) > (y[1] - y[0]) * (x[2] - x[0]):
+            continue
+        inside = True
+        for k in range(3):
+            ex, ey = x[(k + 1) % 3] - x[k], y[(k + 1) % 3] - y[k]
+            if ex * (q_dst[i, 1] - y[k]) - ey * (q_dst[i, 0] - x[k]) < -tol * math.hypot(ex, ey):
+                inside = False
+        out[i] = inside
+    return out
+
+
+@_compiled
+def neighbourhood_sums(src, edges, dst):
+    """Normal equations of the affine fits dst ~ c + A (x - src[v]) over each kept vertex's closed Delaunay
+    neighbourhood: mat (n, 3, 3) = sum f f^T and rhs (n, 3, 2) = sum f dst[w]^T, f = (src[w] - src[v], 1).
+
+    Args:
+        src, dst: (n, 2) integer-valued positions of the kept vertices and of their matches; edges: (E, 2).
+    """
+    n = len(src)
+    mat, rhs = np.zeros((n, 3, 3)), np.zeros((n, 3, 2))
+    f = np.empty(3)
+    for j in range(2 * len(edges) + n):
+        if j < 2 * len(edges):
+            v, w = edges[j // 2, j % 2], edges[j // 2, 1 - j % 2]
+        else:
+            v = w = j - 2 * len(edges)
+        f[0], f[1], f[2] = src[w, 0] - src[v, 0], src[w, 1] - src[v, 1], 1.0
+        for r in range(3):
+            for c in range(3):
+                mat[v, r, c] += f[r] * f[c]
+            for c in range(2):
+                rhs[v, r, c] += f[r] * dst[w, c]
+    return mat, rhs
+
+
+@_compiled
+def relation(p, q, first, degree, adjacent):
+    """NEAR: kept mesh points p and q are one point or Delaunay neighbours; FAR: they are more than two
+    Delaunay edges apart (paths through border points included); APART otherwise."""
+    if p == q:
+        return NEAR
+    if degree[p] > degree[q]:
+        p, q = q, p
+    for j in range(first[p], first[p] + degree[p]):
+        if adjacent[j] == q:
+            return NEAR
+    for j in range(first[p], first[p] + degree[p]):
+        k = adjacent[j]
+        for m in range(first[k], first[k] + degree[k]):
+            if adjacent[m] == q:
+                return APART
+    return FAR
+
+
+@_compiled
+def near_unit_pairs(members, start, edges):
+    """Unit pairs (a, b) near in one image: on one kept vertex (each pair once, a < b) or on the two ends of
+    a mesh edge.
+
+    Args:
+        members: (A,) units grouped by kept vertex; start: (n + 1,) bounds of each vertex's group.
+        edges: (E, 2) the mesh edges between kept vertices.
+
+    Returns:
+        a, b: (N,) unit ids.
+    """
+    total = 0
+    for v in range(len(start) - 1):
+        size = start[v + 1] - start[v]
+        total += size * (size - 1) // 2
+    for e in range(len(edges)):
+        total += (start[edges[e, 0] + 1] - start[edges[e, 0]]) * (start[edges[e, 1] + 1] - start[edges[e, 1]])
+    a, b = np.empty(total, np.int64), np.empty(total, np.int64)
+    j = 0
+    for v in range(len(start) - 1):
+        for i in range(start[v], start[v + 1]):
+            for k in range(start[v], start[v + 1]):
+                if members[i] < members[k]:
+                    a[j], b[j] = members[i], members[k]
+                    j += 1
+    for e in range(len(edges)):
+        for i in range(start[edges[e, 0]], start[edges[e, 0] + 1]):
+            for k in range(start[edges[e, 1]], start[edges[e, 1] + 1]):
+                a[j], b[j] = members[i], members[k]
+                j += 1
+    return a, b
+
+
+@_compiled
+def survivors(a, b, order, n_units):
+    """Units surviving the walk in ``order`` (the units taking part, best first) where each surviving unit
+    removes its inconsistent neighbours: (n_units,) bool.
+
+    Args:
+        a, b: (E,) inconsistent unit pairs, in either order.
+    """
+    rank = np.full(n_units, -1, np.int64)
+    for r in range(len(order)):
+        rank[order[r]] = r
+    count = np.zeros(n_units + 1, np.int64)  # per unit, its better-ranked inconsistent neighbours
+    for e in range(len(a)):
+        count[(b[e] if rank[a[e]] < rank[b[e]] else a[e]) + 1] += 1
+    start = np.cumsum(count)
+    fill = start[:-1].copy()
+    remover = np.empty(len(a), np.int64)
+    for e in range(len(a)):
+        better, worse = (a[e], b[e]) if rank[a[e]] < rank[b[e]] else (b[e], a[e])
+        remover[fill[worse]] = better
+        fill[worse] += 1
+    survive = np.zeros(n_units, np.bool_)
+    for u in order:
+        survive[u] = True
+        for j in range(start[u], start[u + 1]):
+            if survive[remover[j]]:
+                survive[u] = False
+                break
+    return survive
+
+
+@_compiled
+def _classified_pairs(by_vertex, alive, point, n, edges, other, first, degree, adjacent):
+    """The near unit pairs a, b (N,) of one image and their relation (N,) in the other image, whose mesh
+    points of the units are ``other`` and whose adjacency is first, degree, adjacent."""
+    members = by_vertex[alive[by_vertex]]
+    start = np.zeros(n + 1, np.int64)
+    for u in members:
+        start[point[u] + 1] += 1
+    a, b = near_unit_pairs(members, np.cumsum(start), edges)
+    kind = np.empty(len(a), np.int64)
+    for j in range(len(a)):
+        kind[j] = relation(other[a[j]], other[b[j]], first, degree, adjacent)
+    return a, b, kind
+
+
+@_compiled
+def contraction_step(alive, score, point0, point1, by_vertex0, by_vertex1, edges0, edges1, n0, n1,
+                     first0, degree0, adjacent0, first1, degree1, adjacent1):
+    """The units one contraction iteration removes: (U,) bool.
+
+    Each image's near unit pairs are classified in the other image: consistent when near there too (found
+    from image 0's), inconsistent when more than two edges apart there. The alive units are ranked by
+    consistent neighbours (descending), score (ascending), then id; walking them by rank, each surviving
+    unit removes its inconsistent neighbours. Removed: the units that do not survive or have no surviving
+    consistent neighbour.
+
+    Args:
+        alive: (U,) bool; score: (U,) best score of each unit's matches, lower is better.
+        point0, point1: (U,) mesh point of each unit in each image (read for alive units).
+        by_vertex0, by_vertex1: (U,) the units sorted by vertex in each image, then score.
+        edges*, n*, first*, degree*, adjacent*: each image's mesh (see ``mesh_tables``).
+    """
+    a0, b0, kind0 = _classified_pairs(by_vertex0, alive, point0, n0, edges0, point1, first1, degree1, adjacent1)
+    a1, b1, kind1 = _classified_pairs(by_vertex1, alive, point1, n1, edges1, point0, first0, degree0, adjacent0)
+    n_consistent = np.zeros(len(alive), np.int64)
+    for j in range(len(a0)):
+        if kind0[j] == NEAR:
+            n_consistent[a0[j]] += 1
+            n_consistent[b0[j]] += 1
+    units = np.nonzero(alive)[0]
+    by_score = units[np.argsort(score[units], kind="mergesort")]
+    order = by_score[np.argsort(-n_consistent[by_score], kind="mergesort")]
+    survive = survivors(np.concatenate((a0[kind0 == FAR], a1[kind1 == FAR])),
+                        np.concatenate((b0[kind0 == FAR], b1[kind1 == FAR])), order, len(alive))
+    supported = np.zeros(len(alive), np.bool_)
+    for j in range(len(a0)):
+        if kind0[j] == NEAR and survive[a0[j]] and survive[b0[j]]:
+            supported[a0[j]] = supported[b0[j]] = True
+    return alive & ~(survive & supported)
