@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -338,6 +339,27 @@ def dtm_filter(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0: tupl
     Returns:
         DTMResult with per-candidate keep flags, removal iterations and restoration flags.
     """
+    load_kernels()
+    return _filter(xy0, xy1, scores, size0, size1, unmatched0, unmatched1, config)
+
+
+@cache
+def load_kernels() -> None:
+    """Load DTM's compiled loops (``dtm_kernels``) in this process, once: about 0.4 s from numba's on-disk
+    cache, about 13 s on a 2-core CPU the first time they are compiled. Call it before forking workers that run DTM, or each of
+    them pays it."""
+    start = time.perf_counter()
+    g = np.random.default_rng(0)
+    xy = g.uniform(0, 64, (40, 2))
+    _filter(xy, xy + g.normal(0, 8, xy.shape), g.uniform(size=40), (64, 64), (64, 64), g.uniform(0, 64, (10, 2)),
+            g.uniform(0, 64, (10, 2)), None)
+    seconds = time.perf_counter() - start
+    if seconds > 2:
+        log.info("DTM: compiled its loops in %.1f s (first use; numba caches them for later runs)", seconds)
+
+
+def _filter(xy0, xy1, scores, size0, size1, unmatched0, unmatched1, config) -> DTMResult:
+    """``dtm_filter`` once the kernels are loaded."""
     cfg = DTMConfig.from_dict(config) if isinstance(config, dict) else (config or DTMConfig())
     xy0 = np.asarray(xy0, np.float64).reshape(-1, 2)
     xy1 = np.asarray(xy1, np.float64).reshape(-1, 2)
@@ -369,16 +391,6 @@ def dtm_filter(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0: tupl
     log.debug("DTM: %d contraction iterations, %d of %d units kept (%d restored)", iterations,
               units.alive.sum(), len(uscore), restored.sum())
     return DTMResult(units.alive[unit_of], removed_at[unit_of], restored[unit_of])
-
-
-@cache
-def load_kernels() -> None:
-    """Load DTM's compiled loops in this process (about 0.4 s from numba's on-disk cache, compiled there on
-    first use), once: call before forking workers that run DTM, or each of them pays it."""
-    g = np.random.default_rng(0)
-    xy = g.uniform(0, 64, (40, 2))
-    dtm_filter(xy, xy + g.normal(0, 8, xy.shape), g.uniform(size=40), (64, 64), (64, 64),
-               g.uniform(0, 64, (10, 2)), g.uniform(0, 64, (10, 2)))
 
 
 class _Units:
