@@ -346,8 +346,8 @@ def dtm_filter(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0: tupl
 @cache
 def load_kernels() -> None:
     """Load DTM's compiled loops (``dtm_kernels``) in this process, once: about 0.4 s from numba's on-disk
-    cache, about 13 s on a 2-core CPU the first time they are compiled. Call it before forking workers that run DTM, or each of
-    them pays it."""
+    cache, about 13 s on a 2-core CPU the first time they are compiled. Call it before forking workers that
+    run DTM, or each of them pays it."""
     start = time.perf_counter()
     g = np.random.default_rng(0)
     xy = g.uniform(0, 64, (40, 2))
