@@ -1,5 +1,8 @@
 """DTM on synthetic homography data with exact ground truth, tiny inputs and duplicates."""
 
+import subprocess
+import sys
+
 import cv2
 import numpy as np
 import pytest
@@ -287,3 +290,27 @@ def test_real_pair_low_inlier_ratio_does_not_collapse(data_dir):
     assert correct.sum() > 300 and correct.mean() < 0.15
     assert correct[res.keep].sum() > 0.6 * correct.sum()
     assert correct[res.keep].mean() > 0.85
+
+
+_WARM_CHECK = """
+import numpy as np
+from numba.core.registry import CPUDispatcher
+from slime_match.matching import dtm, dtm_kernels
+kernels = {n: k for n, k in vars(dtm_kernels).items() if isinstance(k, CPUDispatcher)}
+dtm.load_kernels()
+loaded = {n: len(k.signatures) for n, k in kernels.items()}
+g = np.random.default_rng(1)
+xy = np.rint(g.uniform(0, 300, (600, 2)))
+moved = np.where(g.uniform(size=(600, 1)) < 0.6, xy + g.normal(0, 1, xy.shape), g.uniform(0, 300, xy.shape))
+dtm.dtm_filter(xy, moved, g.uniform(size=600), (300, 300), (300, 300), g.uniform(0, 300, (300, 2)),
+               g.uniform(0, 300, (300, 2)))
+dtm.dtm_filter(xy, moved, g.uniform(size=600), (300, 300), (300, 300))
+print(loaded == {n: len(k.signatures) for n, k in kernels.items()}, sum(loaded.values()))
+"""
+
+
+def test_load_kernels_loads_what_dtm_calls():
+    """After ``load_kernels`` a real DTM call compiles nothing more (forked workers inherit every kernel)."""
+    out = subprocess.run([sys.executable, "-c", _WARM_CHECK], capture_output=True, text=True, check=True)
+    same, loaded = out.stdout.split()
+    assert same == "True" and int(loaded) >= 9
