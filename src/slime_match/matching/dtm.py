@@ -53,8 +53,17 @@ from scipy.spatial import cKDTree
 
 from ..errors import ConfigError
 from ..options import config_from_dict
-from .dtm_kernels import (contraction_step, insertion_order, locate, mesh_tables, neighbourhood_sums,
-                          ring_carved, transfer_test, triangle_corners, walk_tables)
+from .dtm_kernels import (
+    contraction_step,
+    insertion_order,
+    locate,
+    mesh_tables,
+    neighbourhood_sums,
+    ring_carved,
+    transfer_test,
+    triangle_corners,
+    walk_tables,
+)
 
 log = logging.getLogger("slime_match")
 _PARALLEL_MIN = 6000  # points (candidates + unmatched) from which both meshes are built in two threads

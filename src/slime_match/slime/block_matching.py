@@ -24,8 +24,8 @@ import numpy as np
 import torch
 
 from ..features.laf import set_laf_angle
-from ..matching.dtm import load_kernels
 from ..geometry.ransac import HomographyRansacConfig, ransac_homography_many
+from ..matching.dtm import load_kernels
 from ..pipelines import BasePipeline
 from ..types import Features, Matches
 from .blocks import Block, points_in_blocks, resize_lanczos
