@@ -2,8 +2,8 @@
 transfer test of expansion.
 
 DTM runs on meshes of a few hundred vertices, thousands of times per Slime run. In numpy each of its steps is
-dozens of calls on tiny arrays, and the call overhead dominates; here each step is one pass. All tests are
-exact: positions are integers.
+dozens of calls on tiny arrays, and the call overhead dominates; here each step is one pass. Positions are
+integers, so every geometric test is exact except those on the predicted images of border corners.
 
 Conventions: a mesh has P points, the first n of them kept vertices and the others border points; triangles
 are (T, 3) point indices; each point's Delaunay neighbours are a CSR list ``first``, ``degree``, ``adjacent``.
