@@ -374,8 +374,9 @@ def contraction_step(alive, score, point0, point1, by_vertex0, by_vertex1, edges
     units = np.nonzero(alive)[0]
     by_score = units[np.argsort(score[units], kind="mergesort")]
     order = by_score[np.argsort(-n_consistent[by_score], kind="mergesort")]
-    survive = survivors(np.concatenate((a0[kind0 == FAR], a1[kind1 == FAR])),
-                        np.concatenate((b0[kind0 == FAR], b1[kind1 == FAR])), order, len(alive))
+    far0, far1 = kind0 == FAR, kind1 == FAR
+    survive = survivors(np.concatenate((a0[far0], a1[far1])), np.concatenate((b0[far0], b1[far1])), order,
+                        len(alive))
     supported = np.zeros(len(alive), np.bool_)
     for j in range(len(a0)):
         if kind0[j] == NEAR and survive[a0[j]] and survive[b0[j]]:
