@@ -27,8 +27,9 @@ candidates, ~6-20% correct, used to collapse to 2 matches):
   alive units (and does not remove them): the long tail of iterations removing a few units each costs
   most of the time and expansion restores the same final set.
 
-Implementation: meshes come from OpenCV's incremental Delaunay (``Subdiv2D``, several times faster than
-Qhull on integer positions; one reused per image) and are only rebuilt when an image's vertex set changes.
+Implementation: meshes come from a compiled incremental Delaunay triangulation with exact integer predicates
+(``delaunay``: 2-3x faster than OpenCV's ``Subdiv2D`` on these meshes of a few hundred points, and far
+faster than Qhull) and are only rebuilt when an image's vertex set changes.
 Contraction works on unordered unit pairs: the near pairs of each image are enumerated from its mesh edges
 and the units grouped by vertex, then classified in the other image by walking Delaunay neighbours. Expansion
 locates points by a visibility walk; a unit's test in an image only depends on the kept set, so a rejected
@@ -42,26 +43,23 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import cache, cached_property, lru_cache
 
-import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ConfigError
 from ..options import config_from_dict
+from .delaunay import MAX_SIDE, delaunay
 from .dtm_kernels import (
     contraction_step,
-    insertion_order,
     locate,
     mesh_tables,
-    neighbourhood_sums,
+    local_affine,
     ring_carved,
     transfer_test,
-    triangle_corners,
     walk_tables,
 )
 
@@ -118,41 +116,6 @@ class DTMResult:
     restored: np.ndarray
 
 
-class _Delaunay:
-    """Delaunay triangulations (OpenCV's incremental ``Subdiv2D``) of unique integer points with given
-    bounds, reusing one Subdiv2D (re-initialised per call, it keeps its memory) and one position lookup.
-
-    Args:
-        lo, hi: (x, y) smallest and largest coordinates of every point set to triangulate (the ring's
-            corners in a mesh); the Subdiv2D box and the insertion order, hence ties, depend on them.
-    """
-
-    def __init__(self, lo: Sequence[int], hi: Sequence[int]) -> None:
-        x0, self.y0 = lo[0] - 2, lo[1] - 2
-        self.w, self.h = hi[0] - x0 + 3, hi[1] - self.y0 + 3
-        # a far bounding box keeps Subdiv2D's virtual outer vertices from shadowing hull triangles
-        far = 50 * max(self.w, self.h)
-        self.box = (x0 - far, self.y0 - far, self.w + 2 * far, self.h + 2 * far)
-        self.first_cell = x0 + self.w * self.y0
-        self.index = np.empty(self.w * self.h, np.int64)  # cell -> point, only written cells read
-        self.subdiv = cv2.Subdiv2D()
-
-    @classmethod
-    def around(cls, points: np.ndarray) -> _Delaunay:
-        """For the given points."""
-        return cls(points.min(0).astype(int).tolist(), points.max(0).astype(int).tolist())
-
-    def __call__(self, points: np.ndarray) -> np.ndarray:
-        """(T, 3) int64 triangles of (P, 2) float64 unique integer points within the bounds, P >= 3 and not
-        all collinear."""
-        self.subdiv.initDelaunay(self.box)
-        ip = points.astype(np.int64)
-        # insertion along a snake of horizontal strips keeps Subdiv2D's point location walks short
-        strip = max(int(4 * math.sqrt(self.w * self.h / len(points))), 1)
-        self.subdiv.insert(points[insertion_order(ip, self.y0, strip)])
-        return triangle_corners(ip, self.subdiv.getTriangleList(), self.index, self.w, self.first_cell)
-
-
 @dataclass
 class _Triangulation:
     """A planar Delaunay triangulation whose hull is the border ring, with its tables
@@ -176,11 +139,12 @@ class _Triangulation:
     edges: np.ndarray
 
     @classmethod
-    def of(cls, points: np.ndarray, delaunay: _Delaunay | None = None, kept: int | None = None) -> _Triangulation:
-        """Triangulate unique integer-valued (P, 2) points, with ``delaunay`` if given; the first ``kept``
-        (default all) are kept points."""
-        simplices = (delaunay or _Delaunay.around(points))(points)
-        return cls(points, simplices, *mesh_tables(points, simplices, len(points) if kept is None else kept))
+    def of(cls, points: np.ndarray, kept: int | None = None) -> _Triangulation:
+        """Triangulate unique integer-valued (P, 2) points that include the four corners of their bounding
+        rectangle (``delaunay``); the first ``kept`` (default all) are kept points."""
+        simplices, neighbors = delaunay(points)
+        return cls(points, simplices, neighbors,
+                   *mesh_tables(simplices, len(points), len(points) if kept is None else kept))
 
     @cached_property
     def walk(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -210,10 +174,12 @@ class _Mesh:
     _affine: tuple[bytes, tuple[np.ndarray, np.ndarray]] | None = field(default=None, init=False, repr=False)
 
     def local_affine(self, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``_local_affine(self, dst)``, remembered for the last dst."""
+        """``dtm_kernels.local_affine`` of the kept vertices to their positions dst (n, 2) in the other image:
+        A (n, 2, 2), c (n, 2) with dst ~ c + A (x - src[v]) near vertex v; remembered for the last dst."""
         key = dst.tobytes()
         if self._affine is None or self._affine[0] != key:
-            self._affine = key, _local_affine(self, dst)
+            n = len(self.vertex)
+            self._affine = key, local_affine(self.tri.points[:n], self.tri.edges, dst, _RIDGE)
         return self._affine[1]
 
     @cached_property
@@ -237,7 +203,7 @@ def _border_ring(size: tuple[int, int], step: int) -> np.ndarray:
 
 
 def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int],
-                 unmatched: np.ndarray | None, cfg: DTMConfig, delaunay: _Delaunay) -> _Mesh:
+                 unmatched: np.ndarray | None, cfg: DTMConfig) -> _Mesh:
     """Delaunay mesh of the given vertices, the border ring and the carving unmatched keypoints.
 
     The unmatched keypoints that share a Delaunay triangle with the ring (in the triangulation of
@@ -249,7 +215,6 @@ def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int
             vertices.
         unmatched: (U >= 1, 2) unique rounded unmatched keypoints of this image off all candidate vertices,
             or None.
-        delaunay: triangulator of this image's points (the ring's bounds).
     """
     pts = vertex_xy[vertex]
     n = len(pts)
@@ -257,33 +222,12 @@ def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int
     border = _border_ring(size, max(round(float(cfg.border_spacing * math.sqrt(w * h / max(n, 1)))), 1))
     if unmatched is not None:
         first_free = n + len(border)
-        simplices = delaunay(np.concatenate([pts, border, unmatched]))
+        simplices = delaunay(np.concatenate([pts, border, unmatched]))[0]
         border = np.concatenate([border, unmatched[ring_carved(simplices, n, first_free, len(unmatched))]])
-    tri = _Triangulation.of(np.concatenate([pts, border]), delaunay, n)
+    tri = _Triangulation.of(np.concatenate([pts, border]), n)
     local = np.full(len(vertex_xy), -1, np.int64)
     local[vertex] = np.arange(n)
     return _Mesh(tri, vertex, local)
-
-
-def _local_affine(mesh: _Mesh, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Affine map image -> other image around each kept vertex, fitted on its closed neighbourhood.
-
-    Ridge-regularised toward the global affine fit so that degenerate neighbourhoods stay defined.
-
-    Args:
-        dst: (n, 2) position in the other image of each kept vertex's representative match.
-
-    Returns:
-        A (n, 2, 2), c (n, 2): dst ~ c + A (x - src[v]) near vertex v at src[v].
-    """
-    n = len(dst)
-    src = mesh.tri.points[:n]
-    glob = np.linalg.lstsq(np.column_stack([src - src.mean(0), np.ones(n)]), dst, rcond=None)[0]
-    mat, rhs = neighbourhood_sums(src, mesh.tri.edges, dst)
-    mat[:, [0, 1], [0, 1]] += _RIDGE
-    rhs[:, :2, :] += _RIDGE * glob[:2][None]
-    sol = np.linalg.solve(mat, rhs)
-    return np.ascontiguousarray(np.transpose(sol[:, :2, :], (0, 2, 1))), np.ascontiguousarray(sol[:, 2, :])
 
 
 def _transfer_ok(mesh: _Mesh, dst_v: np.ndarray, q_src: np.ndarray, q_dst: np.ndarray,
@@ -377,6 +321,9 @@ def _filter(xy0, xy1, scores, size0, size1, unmatched0, unmatched1, config) -> D
     if not (len(xy1) == len(scores) == k):
         raise ValueError("xy0, xy1 and scores must have the same length")
     sizes = (tuple(int(s) for s in size0), tuple(int(s) for s in size1))
+    if max(max(sizes[0]), max(sizes[1])) + 1 > MAX_SIDE:
+        raise ValueError(f"DTM supports images up to {MAX_SIDE - 1} px a side (exact integer Delaunay predicates), "
+                         f"got {sizes[0]} and {sizes[1]}: resize the images")
     if k == 0:
         return DTMResult(np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0, bool))
 
@@ -421,8 +368,6 @@ class _Units:
         self.unmatched, self.cfg, self.pool = unmatched, cfg, pool
         self.alive = np.ones(len(score), bool)
         self.by_vertex = tuple(np.lexsort((score, v)) for v in uv)
-        # one per image (the two may be built in parallel), for points within the border ring
-        self._delaunay = tuple(_Delaunay((-1, -1), (w, h)) for h, w in sizes)
         self._cache: list[tuple[bytes, _Mesh] | None] = [None, None]
 
     def mesh(self, s: int) -> _Mesh:
@@ -432,11 +377,11 @@ class _Units:
         cached = self._cache[s]
         if cached is None or cached[0] != key:
             cached = self._cache[s] = (key, _triangulate(vertex, self.vxy[s], self.sizes[s], self.unmatched[s],
-                                                         self.cfg, self._delaunay[s]))
+                                                         self.cfg))
         return cached[1]
 
     def meshes(self) -> tuple[_Mesh, _Mesh]:
-        """Both images' meshes, built in two threads for large inputs (OpenCV releases the GIL)."""
+        """Both images' meshes, built in two threads for large inputs (the compiled loops release the GIL)."""
         if self.pool is not None:
             return tuple(self.pool.map(self.mesh, (0, 1)))
         return self.mesh(0), self.mesh(1)

@@ -1,4 +1,4 @@
-"""Compiled loops of DTM (numba): Delaunay mesh tables, one contraction step, point location and the
+"""Compiled loops of DTM (numba): mesh neighbour tables, one contraction step, point location and the
 transfer test of expansion.
 
 DTM runs on meshes of a few hundred vertices, thousands of times per Slime run. In numpy each of its steps is
@@ -22,35 +22,6 @@ NEAR, APART, FAR = 0, 1, 2  # relations of two kept mesh points, see ``relation`
 
 
 @_compiled
-def insertion_order(ip, y0, strip):
-    """(P,) order of integer points ip (P, 2) along a snake of horizontal strips ``strip`` px high from y0:
-    strips top to bottom, x ascending in even strips and descending in odd ones, ties by index."""
-    span = 1
-    for i in range(len(ip)):
-        span = max(span, abs(ip[i, 0]) + 1)
-    key = np.empty(len(ip), np.int64)
-    for i in range(len(ip)):
-        row = (ip[i, 1] - y0) // strip
-        key[i] = row * (2 * span + 1) + (-ip[i, 0] if row & 1 else ip[i, 0]) + span
-    return np.argsort(key, kind="mergesort")
-
-
-@_compiled
-def triangle_corners(ip, triangles, index, width, first_cell):
-    """(T, 3) point index of each corner of an OpenCV Subdiv2D triangle list (T, 6) of the points ip (P, 2).
-
-    ``index`` is scratch space with a cell for every position: cell y * width + x - first_cell.
-    """
-    for i in range(len(ip)):
-        index[ip[i, 1] * width + ip[i, 0] - first_cell] = i
-    out = np.empty((len(triangles), 3), np.int64)
-    for t in range(len(triangles)):
-        for k in range(3):
-            out[t, k] = index[np.int64(triangles[t, 2 * k + 1]) * width + np.int64(triangles[t, 2 * k]) - first_cell]
-    return out
-
-
-@_compiled
 def ring_carved(simplices, n, first_free, n_free):
     """(n_free,) whether each free point (indices first_free...) shares a triangle with a ring point
     (indices n to first_free - 1)."""
@@ -67,43 +38,27 @@ def ring_carved(simplices, n, first_free, n_free):
 
 
 @_compiled
-def mesh_tables(points, simplices, n):
-    """Orient the triangles (in place) and build the tables of a triangulation.
+def mesh_tables(simplices, n_pts, n):
+    """The neighbour tables of a triangulation of n_pts points.
 
     Args:
-        points: (P, 2) float64 integer-valued positions; simplices: (T, 3) int64, made counter-clockwise in
-            x-right, y-down axes (positive cross product); n: the first n points are kept vertices.
+        simplices: (T, 3) int64 triangles, counter-clockwise in x-right, y-down axes (positive cross product);
+        n: the first n points are kept vertices.
 
     Returns:
-        neighbors: (T, 3) triangle across the edge facing each corner, -1 on the hull.
-        first, degree: (P,) start and size of each point's group in ``adjacent``.
+        first, degree: (n_pts,) start and size of each point's group in ``adjacent``.
         adjacent: (3 T,) the Delaunay neighbours of every point, grouped by point.
         edges: (E, 2) undirected edges between kept vertices, a < b < n.
     """
-    n_tri, n_pts = len(simplices), len(points)
-    for t in range(n_tri):
-        a, b, c = simplices[t, 0], simplices[t, 1], simplices[t, 2]
-        if ((points[b, 0] - points[a, 0]) * (points[c, 1] - points[a, 1])
-                < (points[b, 1] - points[a, 1]) * (points[c, 0] - points[a, 0])):
-            simplices[t, 1], simplices[t, 2] = c, b
-    # the edge facing corner k runs from corner k + 1 to corner k + 2; its twin runs the other way
-    key = np.empty(3 * n_tri, np.int64)
+    n_tri = len(simplices)
     degree = np.zeros(n_pts, np.int64)
     n_edges = 0
     for t in range(n_tri):
         for k in range(3):
             a, b = simplices[t, (k + 1) % 3], simplices[t, (k + 2) % 3]
-            key[3 * t + k] = min(a, b) * n_pts + max(a, b)
             degree[a] += 1
             if a < b < n:
                 n_edges += 1
-    order = np.argsort(key)
-    neighbors = np.full((n_tri, 3), -1, np.int64)
-    for j in range(len(order) - 1):
-        e, f = order[j], order[j + 1]
-        if key[e] == key[f]:
-            neighbors[e // 3, e % 3] = f // 3
-            neighbors[f // 3, f % 3] = e // 3
     first = np.cumsum(degree) - degree
     fill = first.copy()
     adjacent = np.empty(3 * n_tri, np.int64)
@@ -117,7 +72,7 @@ def mesh_tables(points, simplices, n):
             if a < b < n:
                 edges[n_edges, 0], edges[n_edges, 1] = a, b
                 n_edges += 1
-    return neighbors, first, degree, adjacent, edges
+    return first, degree, adjacent, edges
 
 
 @_compiled
@@ -224,14 +179,70 @@ def transfer_test(points, simplices, proper, n, simplex, nearest, dst_v, affine,
 
 
 @_compiled
-def neighbourhood_sums(src, edges, dst):
-    """Normal equations of the affine fits dst ~ c + A (x - src[v]) over each kept vertex's closed Delaunay
-    neighbourhood: mat (n, 3, 3) = sum f f^T and rhs (n, 3, 2) = sum f dst[w]^T, f = (src[w] - src[v], 1).
+def _solve3(m, r):
+    """Solve the 3 x 3 system m x = r (r: (3, 2)) by Gaussian elimination with partial pivoting (m and r are
+    overwritten); returns x (3, 2)."""
+    for col in range(3):
+        pivot = col
+        for row in range(col + 1, 3):
+            if abs(m[row, col]) > abs(m[pivot, col]):
+                pivot = row
+        for c in range(3):
+            m[col, c], m[pivot, c] = m[pivot, c], m[col, c]
+        for c in range(2):
+            r[col, c], r[pivot, c] = r[pivot, c], r[col, c]
+        for row in range(col + 1, 3):
+            factor = m[row, col] / m[col, col]
+            for c in range(col, 3):
+                m[row, c] -= factor * m[col, c]
+            for c in range(2):
+                r[row, c] -= factor * r[col, c]
+    x = np.empty((3, 2))
+    for row in range(2, -1, -1):
+        for c in range(2):
+            value = r[row, c]
+            for k in range(row + 1, 3):
+                value -= m[row, k] * x[k, c]
+            x[row, c] = value / m[row, row]
+    return x
+
+
+@_compiled
+def local_affine(src, edges, dst, ridge):
+    """Affine maps dst ~ c + A (x - src[v]) fitted over each kept vertex's closed Delaunay neighbourhood by
+    least squares, ridge-regularised toward the global affine fit: ``ridge`` (px^2) is added to the normal
+    equations' linear diagonal, pulling A toward the global linear map (so that collinear or single-vertex
+    neighbourhoods stay defined).
 
     Args:
-        src, dst: (n, 2) integer-valued positions of the kept vertices and of their matches; edges: (E, 2).
+        src, dst: (n >= 1, 2) positions of the kept vertices and of their matches; edges: (E, 2) mesh edges.
+
+    Returns:
+        A (n, 2, 2), c (n, 2).
     """
     n = len(src)
+    mean_s, mean_d = np.zeros(2), np.zeros(2)
+    for v in range(n):
+        for k in range(2):
+            mean_s[k] += src[v, k] / n
+            mean_d[k] += dst[v, k] / n
+    # global linear map: centred least squares (a vanishing ridge picks the minimum-norm one if singular)
+    sxx, sxy, syy = 0.0, 0.0, 0.0
+    cross = np.zeros((2, 2))  # sum (x - mean_s)_r (dst - mean_d)_c
+    for v in range(n):
+        x, y = src[v, 0] - mean_s[0], src[v, 1] - mean_s[1]
+        sxx, sxy, syy = sxx + x * x, sxy + x * y, syy + y * y
+        for c in range(2):
+            d = dst[v, c] - mean_d[c]
+            cross[0, c] += x * d
+            cross[1, c] += y * d
+    tiny = 1e-12 * max(sxx + syy, 1.0)
+    sxx, syy = sxx + tiny, syy + tiny
+    det = sxx * syy - sxy * sxy
+    glob = np.empty((2, 2))  # rows: the coefficients of x and y
+    for c in range(2):
+        glob[0, c] = (syy * cross[0, c] - sxy * cross[1, c]) / det
+        glob[1, c] = (sxx * cross[1, c] - sxy * cross[0, c]) / det
     mat, rhs = np.zeros((n, 3, 3)), np.zeros((n, 3, 2))
     f = np.empty(3)
     for j in range(2 * len(edges) + n):
@@ -245,7 +256,17 @@ def neighbourhood_sums(src, edges, dst):
                 mat[v, r, c] += f[r] * f[c]
             for c in range(2):
                 rhs[v, r, c] += f[r] * dst[w, c]
-    return mat, rhs
+    affine, offset = np.empty((n, 2, 2)), np.empty((n, 2))
+    for v in range(n):
+        for k in range(2):
+            mat[v, k, k] += ridge
+            for c in range(2):
+                rhs[v, k, c] += ridge * glob[k, c]
+        sol = _solve3(mat[v], rhs[v])
+        for c in range(2):
+            affine[v, c, 0], affine[v, c, 1] = sol[0, c], sol[1, c]
+            offset[v, c] = sol[2, c]
+    return affine, offset
 
 
 @_compiled
