@@ -1,11 +1,16 @@
 """Blob matching against a brute-force reference on small random data."""
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 import torch
 
 from slime_match.errors import ConfigError
+from slime_match.matching import nn_kernels
 from slime_match.matching.blob import BlobConfig, blob_match, greedy_many_to_many
+from slime_match.matching.nn import knn
 
 
 def reference_blob(d0, d1, xy0, xy1, k=10, p_n=3, radius=16.0):
@@ -80,6 +85,37 @@ def test_greedy_many_to_many_order():
     # p_n = 1: (1,0) first, then (0,0) blocked by column 0, (0,1) accepted, (0,2) blocked by row 0, (1,1) blocked.
     assert greedy_many_to_many(rows, cols, vals, 1).tolist() == [False, True, False, True, False]
     assert greedy_many_to_many(rows, cols, vals, 2).tolist() == [True, True, False, True, True]
+    assert greedy_many_to_many(rows[:0], cols[:0], vals[:0], 2).tolist() == []
+
+
+@pytest.mark.parametrize("p_n", [1, 3])
+def test_greedy_many_to_many_reference(p_n):
+    """Random distinct pairs with tied values against a Python loop over a stable argsort."""
+    g = np.random.default_rng(p_n)
+    pairs = np.unique(g.integers(0, 60, (3000, 2)), axis=0)
+    pairs = pairs[g.permutation(len(pairs))]
+    values = g.integers(0, 50, len(pairs)).astype(np.float32)
+    row_count, col_count, ref = np.zeros(60, int), np.zeros(60, int), np.zeros(len(pairs), bool)
+    for k in np.argsort(values, kind="stable"):
+        i, j = pairs[k]
+        if row_count[i] < p_n and col_count[j] < p_n:
+            row_count[i] += 1
+            col_count[j] += 1
+            ref[k] = True
+    np.testing.assert_array_equal(greedy_many_to_many(pairs[:, 0], pairs[:, 1], values, p_n), ref)
+
+
+def test_shortlist_kernel_equals_index_membership():
+    """The compiled shortlist against the torch expression that CUDA runs."""
+    d0, d1, _, _ = make_data(seed=5)
+    row_dist, row_idx, _, col_idx = knn(torch.from_numpy(d0).float(), torch.from_numpy(d1).float(), 10, 4)
+    r_i = torch.arange(len(d0)).repeat_interleave(10)
+    in_both = (col_idx[row_idx.flatten()] == r_i[:, None]).any(1)
+    i, j, v = nn_kernels.shortlist(row_dist.numpy(), row_idx.numpy(), col_idx.numpy())
+    assert in_both.sum() > 50
+    np.testing.assert_array_equal(i, r_i[in_both].numpy())
+    np.testing.assert_array_equal(j, row_idx.flatten()[in_both].numpy())
+    np.testing.assert_array_equal(v, row_dist.flatten()[in_both].numpy())
 
 
 def test_context_ratio_ignores_same_place_competitors():
@@ -122,3 +158,24 @@ def test_cuda_matches_cpu():
     cpu = blob_match(*t)
     gpu = blob_match(*[a.cuda() for a in t])
     assert set(zip(cpu.idx0.tolist(), cpu.idx1.tolist())) == set(zip(gpu.idx0.tolist(), gpu.idx1.tolist()))
+
+
+_WARM_CHECK = """
+import torch
+from numba.core.registry import CPUDispatcher
+from slime_match.matching import blob, nn_kernels
+kernels = {n: k for n, k in vars(nn_kernels).items() if isinstance(k, CPUDispatcher)}
+blob.load_kernels()
+loaded = {n: len(k.signatures) for n, k in kernels.items()}
+g = torch.Generator().manual_seed(1)
+d0, d1 = torch.rand(700, 128, generator=g), torch.rand(500, 128, generator=g)
+blob.blob_match(d0, d1, torch.rand(700, 2, generator=g) * 300, torch.rand(500, 2, generator=g) * 300)
+print(loaded == {n: len(k.signatures) for n, k in kernels.items()}, sum(loaded.values()))
+"""
+
+
+def test_load_kernels_loads_what_blob_matching_calls():
+    """After ``load_kernels`` a real Blob matching call compiles nothing more (forked workers inherit them)."""
+    out = subprocess.run([sys.executable, "-c", _WARM_CHECK], capture_output=True, text=True, check=True)
+    same, loaded = out.stdout.split()
+    assert same == "True" and int(loaded) >= 5  # rows, columns, shortlist, greedy, first far

@@ -5,7 +5,16 @@ import pytest
 import torch
 
 from slime_match.errors import ConfigError
-from slime_match.matching.nn import _smallest, knn, match_fginn, match_mutual_nn, match_nn_ratio
+from slime_match.matching import nn_kernels
+from slime_match.matching.nn import (
+    _smallest,
+    _smallest_cols,
+    knn,
+    match_fginn,
+    match_mutual_nn,
+    match_nn_ratio,
+    nearest_far,
+)
 
 
 def dists(d0, d1):
@@ -47,6 +56,91 @@ def test_smallest_sorted_with_ties_to_the_lowest_index(shape):
             np.testing.assert_array_equal(vals.numpy(), np.take_along_axis(d.numpy(), order, 1))
     d[3, :] = float("nan")  # no bound: the torch.topk fallback
     assert _smallest(d, 5)[0].shape == (shape[0], 5)
+
+
+def stable_smallest(a, k):
+    """Reference: the first k of a stable ascending argsort of each row (NaN last)."""
+    order = np.argsort(a, axis=1, kind="stable")[:, :k]
+    return np.take_along_axis(a, order, 1), order
+
+
+def assert_same(got, ref):
+    """Equal values (bitwise, NaN included) and indices."""
+    np.testing.assert_array_equal(got[0].view(np.int32), ref[0].view(np.int32))
+    np.testing.assert_array_equal(got[1], ref[1])
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (5, 3), (40, 25), (60, 300), (300, 70)])
+def test_kernels_match_stable_argsort(shape):
+    """Rows and columns (without transposing) on random and tied inputs, for k from 1 to the whole line."""
+    g = np.random.default_rng(shape[0] * shape[1])
+    for d in (g.random(shape, np.float32), g.integers(0, 4, shape).astype(np.float32),  # many ties
+              np.zeros(shape, np.float32), -g.random(shape, np.float32)):
+        for k in {1, 2, 10, shape[1]}:
+            *got, ok = nn_kernels.smallest_rows(d, min(k, shape[1]))
+            assert ok
+            assert_same(got, stable_smallest(d, min(k, shape[1])))
+        for k in {1, 2, 10, shape[0]}:
+            *got, ok = nn_kernels.smallest_cols(d, min(k, shape[0]))
+            assert ok
+            assert_same(got, stable_smallest(np.ascontiguousarray(d.T), min(k, shape[0])))
+    vals, idx, ok = nn_kernels.smallest_rows(np.zeros(shape, np.float32), 0)
+    assert ok and vals.shape == idx.shape == (shape[0], 0)
+
+
+def test_kernels_nan_and_inf():
+    """NaN sorts last; with fewer than k NaN-free groups of the entries equal mod 8k (the former search's
+    bound is NaN) the kernels hand over to torch.topk."""
+    g = np.random.default_rng(1)
+    d = g.integers(0, 5, (30, 200)).astype(np.float32)
+    d[g.random(d.shape) < 0.05] = np.inf
+    d[2, [3, 50, 51, 120, 199]] = np.nan  # a few
+    d[5, (np.arange(200) % 16 < 3)] = np.nan  # k = 2: one NaN-free group of 4 (no bound here), 13 of 16
+    small = d[:, :12].copy()  # 8k >= M: everything ranked, NaN included
+    for a, ks in ((d, (1, 2, 10, 20)), (small, (1, 5, 12))):
+        for k in ks:
+            *got, ok = nn_kernels.smallest_rows(a, k)
+            assert ok
+            assert_same(got, stable_smallest(a, k))
+            *got, ok = nn_kernels.smallest_cols(np.ascontiguousarray(a.T), k)
+            assert ok
+            assert_same(got, stable_smallest(a, k))
+            np.testing.assert_array_equal(_smallest(torch.from_numpy(a), k)[1].numpy(), stable_smallest(a, k)[1])
+    d[7] = np.nan
+    d[7, [7, 150]] = 1.0  # no NaN-free group of 80 (k = 10): torch.topk answers for the whole matrix
+    assert not nn_kernels.smallest_rows(d, 10)[2] and not nn_kernels.smallest_cols(d.T.copy(), 10)[2]
+    fallback = torch.topk(torch.from_numpy(d), 10, dim=1, largest=False, sorted=True)
+    for got in (_smallest(torch.from_numpy(d), 10), _smallest_cols(torch.from_numpy(d.T.copy()), 10)):
+        torch.testing.assert_close(got[0], fallback[0], equal_nan=True, rtol=0, atol=0)
+        assert torch.equal(got[1], fallback[1])
+
+
+@pytest.mark.parametrize("block_size", [1024, 50, 7])
+def test_knn_ties_to_the_lowest_index(block_size):
+    """Integer descriptors: exact float32 distances with many ties, rows and columns, one or many row blocks
+    (the column lists of the blocks merged)."""
+    g = np.random.default_rng(block_size)
+    d0, d1 = g.integers(0, 3, (120, 4)), g.integers(0, 3, (90, 4))
+    sq = ((d0[:, None, :] - d1[None, :, :]) ** 2).sum(-1)
+    rd, ri, cd, ci = knn(torch.from_numpy(d0).float(), torch.from_numpy(d1).float(), 10, 12, block_size)
+    ref_rows, ref_cols = stable_smallest(sq, 10), stable_smallest(np.ascontiguousarray(sq.T), 12)
+    np.testing.assert_array_equal(ri.numpy(), ref_rows[1])
+    np.testing.assert_array_equal(ci.numpy(), ref_cols[1])
+    np.testing.assert_array_equal(rd.numpy(), np.sqrt(ref_rows[0]).astype(np.float32))
+    np.testing.assert_array_equal(cd.numpy(), np.sqrt(ref_cols[0]).astype(np.float32))
+
+
+def test_nearest_far_rows_equal_gathered_copies():
+    d0, d1, _, xy1 = random_case(4)
+    dist, idx, _, _ = knn(d0, d1, 3)
+    rows = torch.tensor([5, 0, 5, 69, 12, 33])
+    anchor = xy1[idx[rows, 0]]
+    gathered = nearest_far(d0[rows], d1, xy1, anchor, 10.0, dist[rows], idx[rows], block_size=4)
+    assert torch.equal(nearest_far(d0, d1, xy1, anchor, 10.0, dist, idx, block_size=4, rows=rows), gathered)
+    dm = dists(d0, d1)
+    for q, i in enumerate(rows.tolist()):
+        far = np.linalg.norm(xy1.numpy() - anchor[q].numpy(), axis=1) > 10.0
+        assert gathered[q].item() == pytest.approx(dm[i, far].min(), rel=1e-4)
 
 
 def test_ratio_constructed_and_brute_force():

@@ -9,6 +9,7 @@ column located farther than ``context_radius`` from the partner keypoint.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 import torch
@@ -16,6 +17,7 @@ import torch
 from ..errors import ConfigError
 from ..options import config_from_dict
 from ..types import Matches
+from . import nn_kernels
 from .nn import knn, nearest_far
 
 
@@ -59,18 +61,25 @@ def greedy_many_to_many(rows: np.ndarray, cols: np.ndarray, values: np.ndarray, 
     Returns:
         (P,) bool accepted mask.
     """
-    order = np.argsort(values, kind="stable")
-    row_left = [max_per] * (int(rows.max(initial=-1)) + 1)
-    col_left = [max_per] * (int(cols.max(initial=-1)) + 1)
-    keep = []
-    for k, i, j in zip(order.tolist(), rows[order].tolist(), cols[order].tolist()):  # a few thousand pairs
-        if row_left[i] and col_left[j]:
-            row_left[i] -= 1
-            col_left[j] -= 1
-            keep.append(k)
-    accepted = np.zeros(len(values), bool)
-    accepted[keep] = True
-    return accepted
+    return nn_kernels.greedy_accept(rows, cols, np.argsort(values, kind="stable"), max_per)
+
+
+def _shortlist(row_dist: torch.Tensor, row_idx: torch.Tensor,
+               col_idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The row top-k pairs (i, j = row_idx[i, r]) whose row i is also in column j's top-k (exact index
+    membership), in row-major order: i (P,), j (P,) and their distances row_dist[i, r] (P,).
+
+    Args:
+        row_dist, row_idx: (N, kr) each row's nearest columns; col_idx: (M, kc) each column's nearest rows.
+    """
+    if row_idx.device.type == "cpu":
+        found = nn_kernels.shortlist(row_dist.numpy(), row_idx.numpy(), col_idx.numpy())
+        return tuple(torch.from_numpy(a) for a in found)
+    n, kr = row_idx.shape
+    r_i = torch.arange(n, device=row_idx.device).repeat_interleave(kr)
+    r_j = row_idx.flatten()
+    in_both = (col_idx[r_j] == r_i[:, None]).any(1)
+    return r_i[in_both], r_j[in_both], row_dist.flatten()[in_both]
 
 
 def blob_match(desc0: torch.Tensor, desc1: torch.Tensor, xy0: torch.Tensor, xy1: torch.Tensor,
@@ -94,19 +103,13 @@ def blob_match(desc0: torch.Tensor, desc1: torch.Tensor, xy0: torch.Tensor, xy1:
     xy1 = torch.as_tensor(xy1, device=dev).float()
     row_dist, row_idx, col_dist, col_idx = knn(desc0, desc1, cfg.shortlist_k, cfg.shortlist_k, cfg.block_size)
 
-    # Shortlist: row top-k pairs whose row is also in the column's top-k (exact index membership).
-    kr = row_idx.shape[1]
-    r_i = torch.arange(n, device=dev).repeat_interleave(kr)
-    r_j = row_idx.flatten()
-    in_both = (col_idx[r_j] == r_i[:, None]).any(1)
-    i, j, v = r_i[in_both], r_j[in_both], row_dist.flatten()[in_both]
-
+    i, j, v = _shortlist(row_dist, row_idx, col_idx)
     ok = greedy_many_to_many(i.cpu().numpy(), j.cpu().numpy(), v.cpu().numpy(), cfg.max_per_keypoint)
     ok_t = torch.from_numpy(ok).to(dev)
     i, j, v = i[ok_t], j[ok_t], v[ok_t]
 
-    v_r = nearest_far(desc0[i], desc1, xy1, xy1[j], cfg.context_radius, row_dist[i], row_idx[i], cfg.block_size)
-    v_c = nearest_far(desc1[j], desc0, xy0, xy0[i], cfg.context_radius, col_dist[j], col_idx[j], cfg.block_size)
+    v_r = nearest_far(desc0, desc1, xy1, xy1[j], cfg.context_radius, row_dist, row_idx, cfg.block_size, rows=i)
+    v_c = nearest_far(desc1, desc0, xy0, xy0[i], cfg.context_radius, col_dist, col_idx, cfg.block_size, rows=j)
     v_r = torch.where(torch.isinf(v_r), v, v_r)
     v_c = torch.where(torch.isinf(v_c), v, v_c)
     denom = v_r + v_c
@@ -115,3 +118,14 @@ def blob_match(desc0: torch.Tensor, desc1: torch.Tensor, xy0: torch.Tensor, xy1:
     s = score.double().cpu().numpy()
     order = np.argsort(s, kind="stable")
     return Matches(i.cpu().numpy()[order], j.cpu().numpy()[order], s[order])
+
+
+@cache
+def load_kernels() -> None:
+    """Load Blob matching's compiled loops (``nn_kernels``) in this process, once: from numba's on-disk cache,
+    or compiled on first use (a few seconds). Call it before forking workers that run Blob matching, or each
+    of them pays it."""
+    g = torch.Generator().manual_seed(0)
+    desc = torch.rand(40, 8, generator=g)
+    blob_match(desc, torch.rand(40, 8, generator=g), torch.rand(40, 2, generator=g) * 64,
+               torch.rand(40, 2, generator=g) * 64)

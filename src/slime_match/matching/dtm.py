@@ -55,9 +55,9 @@ from ..options import config_from_dict
 from .delaunay import MAX_SIDE, delaunay
 from .dtm_kernels import (
     contraction_step,
+    local_affine,
     locate,
     mesh_tables,
-    local_affine,
     ring_carved,
     transfer_test,
     walk_tables,

@@ -11,6 +11,7 @@ import torch
 
 from ..errors import ConfigError
 from ..types import Matches
+from . import nn_kernels
 
 DEFAULT_BLOCK = 1024
 
@@ -23,36 +24,25 @@ def _sq_dist_block(a: torch.Tensor, b: torch.Tensor, b_sq: torch.Tensor) -> torc
 def _smallest(d: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
     """The k <= M smallest entries of each row of a (B, M) matrix, ascending: values (B, k) and indices (B, k).
 
-    On CPU (3-5x faster than ``torch.topk`` on Slime's matrices of a few hundred squared; equal values go to
-    the lowest index): the k-th smallest of 8k column-group minima bounds the row's k-th smallest from above
-    and only the few entries under the bound are sorted. Elsewhere ``torch.topk``.
+    On CPU a compiled pass (``nn_kernels.smallest_rows``: equal values go to the lowest index, NaN last; about
+    5x faster than ``torch.topk`` on Slime's matrices of a few hundred squared). Elsewhere, and where NaN
+    entries call for it, ``torch.topk``.
     """
-    if d.device.type != "cpu":
-        return torch.topk(d, k, dim=1, largest=False, sorted=True)
-    a = np.ascontiguousarray(d.detach().numpy())
-    rows, m = a.shape
-    if k == 0 or rows == 0:
-        return torch.empty(rows, k, dtype=d.dtype), torch.empty(rows, k, dtype=torch.long)
-    groups = 8 * k
-    if groups < m:
-        low = a[:, :groups].copy()  # (B, groups) minima of the columns equal mod groups
-        for start in range(groups, m, groups):
-            w = min(groups, m - start)
-            np.minimum(low[:, :w], a[:, start:start + w], out=low[:, :w])
-        flat = np.flatnonzero(a <= np.partition(low, k - 1, axis=1)[:, k - 1:k])  # >= k entries per row
-    else:
-        flat = np.arange(a.size)
-    row = flat // m
-    count = np.bincount(row, minlength=rows)
-    if count.min() < k:  # NaN entries defeat the bound
-        return torch.topk(d, k, dim=1, largest=False, sorted=True)
-    pos = np.arange(len(flat)) - (np.cumsum(count) - count)[row]
-    vals = np.full((rows, count.max()), np.inf, a.dtype)  # the candidates of each row, in column order
-    vals[row, pos] = a.ravel()[flat]
-    idx = np.zeros(vals.shape, np.int64)
-    idx[row, pos] = flat - row * m
-    order = np.argsort(vals, axis=1, kind="stable")[:, :k]
-    return torch.from_numpy(np.take_along_axis(vals, order, 1)), torch.from_numpy(np.take_along_axis(idx, order, 1))
+    if d.device.type == "cpu":
+        vals, idx, ok = nn_kernels.smallest_rows(np.ascontiguousarray(d.detach().numpy()), k)
+        if ok:
+            return torch.from_numpy(vals), torch.from_numpy(idx)
+    return torch.topk(d, k, dim=1, largest=False, sorted=True)
+
+
+def _smallest_cols(d: torch.Tensor, k: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """``_smallest(d.T, k)`` for a (B, M) matrix, k <= B: values (M, k) and row indices (M, k); on CPU without
+    transposing d (``nn_kernels.smallest_cols``)."""
+    if d.device.type == "cpu":
+        vals, idx, ok = nn_kernels.smallest_cols(np.ascontiguousarray(d.detach().numpy()), k)
+        if ok:
+            return torch.from_numpy(vals), torch.from_numpy(idx)
+    return torch.topk(d.T, k, dim=1, largest=False, sorted=True)
 
 
 def knn(desc0: torch.Tensor, desc1: torch.Tensor, k_rows: int, k_cols: int = 0,
@@ -86,7 +76,7 @@ def knn(desc0: torch.Tensor, desc1: torch.Tensor, k_rows: int, k_cols: int = 0,
         if kr > 0:
             row_dist[start:start + d.shape[0]], row_idx[start:start + d.shape[0]] = _smallest(d, kr)
         if kc > 0:
-            val, idx = _smallest(d.T, min(kc, d.shape[0]))  # (M, k) per block, merged below
+            val, idx = _smallest_cols(d, min(kc, d.shape[0]))  # (M, k) per block, merged below
             col_vals.append(val)
             col_inds.append(idx + start)
     if kc > 0:
@@ -103,7 +93,7 @@ def knn(desc0: torch.Tensor, desc1: torch.Tensor, k_rows: int, k_cols: int = 0,
 
 def nearest_far(query: torch.Tensor, desc: torch.Tensor, xy: torch.Tensor, anchor: torch.Tensor,
                 radius: float, nn_dist: torch.Tensor, nn_idx: torch.Tensor,
-                block_size: int = DEFAULT_BLOCK) -> torch.Tensor:
+                block_size: int = DEFAULT_BLOCK, rows: torch.Tensor | None = None) -> torch.Tensor:
     """Distance from each query descriptor to its nearest descriptor located farther than radius from an anchor.
 
     The sorted k-NN lists answer most queries exactly (the first far entry is the global answer); queries
@@ -115,26 +105,36 @@ def nearest_far(query: torch.Tensor, desc: torch.Tensor, xy: torch.Tensor, ancho
         anchor: (P, 2) position around which competitors are ignored; radius: in pixels.
         nn_dist, nn_idx: (P, k) ascending distances / indices of each query's k nearest in ``desc``.
         block_size: queries per block of the exact fallback.
+        rows: (P,) optional: query q is row rows[q] of query, nn_dist and nn_idx, which then hold any number
+            of rows (spares gathering copies of them).
 
     Returns:
         (P,) float32 distances; inf where every descriptor is within radius of the anchor.
     """
-    p = query.shape[0]
-    out = torch.full((p,), float("inf"), device=query.device)
+    p = anchor.shape[0]
     if p == 0 or desc.shape[0] == 0:
-        return out
-    far = ((xy[nn_idx] - anchor[:, None, :]).square().sum(-1) > radius * radius)
-    has_far = far.any(1)
-    first = far.float().argmax(1)
-    out[has_far] = nn_dist[has_far, first[has_far]]
-    k = nn_idx.shape[1]
-    rest = torch.nonzero(~has_far).flatten()
-    if rest.numel() and k < desc.shape[0]:
+        return torch.full((p,), float("inf"), device=anchor.device)
+    if rows is None:
+        rows = torch.arange(p, device=anchor.device)
+    if anchor.device.type == "cpu":
+        xy_np, anchor_np = xy.detach().numpy(), anchor.detach().numpy()
+        r2 = np.result_type(xy_np, anchor_np).type(radius * radius)  # the precision torch compares in
+        out, rest = nn_kernels.first_far(nn_dist.numpy(), nn_idx.numpy(), rows.numpy(), xy_np, anchor_np, r2)
+        out, rest = torch.from_numpy(out), torch.from_numpy(rest)
+    else:
+        lists_dist, lists_idx = nn_dist[rows], nn_idx[rows]
+        out = torch.full((p,), float("inf"), device=anchor.device)
+        far = ((xy[lists_idx] - anchor[:, None, :]).square().sum(-1) > radius * radius)
+        has_far = far.any(1)
+        first = far.float().argmax(1)
+        out[has_far] = lists_dist[has_far, first[has_far]]
+        rest = torch.nonzero(~has_far).flatten()
+    if rest.numel() and nn_idx.shape[1] < desc.shape[0]:
         b = desc.float()
         b_sq = (b * b).sum(1)
         for start in range(0, rest.numel(), block_size):
             sel = rest[start:start + block_size]
-            d = _sq_dist_block(query[sel].float(), b, b_sq)
+            d = _sq_dist_block(query[rows[sel]].float(), b, b_sq)
             near = (xy[None, :, :] - anchor[sel][:, None, :]).square().sum(-1) <= radius * radius
             out[sel] = d.masked_fill_(near, float("inf")).amin(1).clamp_min(0.0).sqrt()
     return out

@@ -25,7 +25,7 @@ import torch
 
 from ..features.laf import set_laf_angle
 from ..geometry.ransac import HomographyRansacConfig, ransac_homography_many
-from ..matching.dtm import load_kernels
+from ..matching import blob, dtm
 from ..pipelines import BasePipeline
 from ..types import Features, Matches
 from .blocks import Block, points_in_blocks, resize_lanczos
@@ -267,8 +267,9 @@ def match_pairs(pipeline: BasePipeline, pairs: list[tuple[int, int]], get0: Pair
                 blocks0: list[Block], blocks1: list[Block], workers: int = 1) -> list[Matches]:
     """The base pipeline on many block pairs, in ``workers`` forked processes (see ``fork_map``) when > 1."""
     workers = workers if len(pairs) >= 4 * workers else 1
-    if workers > 1:
-        load_kernels()
+    if workers > 1:  # the workers inherit the compiled loops instead of each loading them
+        dtm.load_kernels()
+        blob.load_kernels()
     return fork_map(lambda k: _match_one(pipeline, pairs[k], get0, get1, blocks0, blocks1), len(pairs), workers,
                     8 * workers)
 
