@@ -10,6 +10,7 @@ from conftest import DATA, require
 
 from slime_match.config import make_config
 from slime_match.eval.metrics import correct_matches_homography
+from slime_match.geometry.ransac import HomographyRansacConfig
 from slime_match.io import load_image
 from slime_match.matcher import Matcher
 from slime_match.pipelines import BaseConfig, make_base_pipeline
@@ -18,6 +19,7 @@ from slime_match.slime.block_matching import (
     describe_fixed_bins,
     fixed_features,
     fork_map,
+    ransac_batches,
     translate_features,
 )
 from slime_match.slime.blocks import make_blocks, points_in_blocks
@@ -109,6 +111,28 @@ def test_fork_map_and_forked_descriptors_equal_one_process(levels):
         describe_fixed_bins(pipeline, wanted, 16, workers)
         out.append([fixed_features(lv, index, b, 16).descriptors for lv, bins in wanted for b, index in bins.items()])
     assert all(torch.equal(a, b) for a, b in zip(*out, strict=True))
+
+
+def test_ransac_batches_do_not_depend_on_the_workers():
+    """Batches of RANSAC_BATCH problems, each its own seeded batched RANSAC: any number of workers gives the
+    same planes, and they find the true homography of every problem with enough inliers."""
+    g = np.random.default_rng(2)
+    h = np.array([[1.1, 0.05, 10.0], [-0.02, 0.95, -5.0], [1e-4, 0.0, 1.0]])
+    problems = []
+    for k in range(120):
+        x0 = g.uniform(0, 256, (30 + k % 40, 2))
+        y = np.c_[x0, np.ones(len(x0))] @ h.T
+        x1 = y[:, :2] / y[:, 2:]
+        angle = g.uniform(0, 2 * np.pi, len(x0) // 3)
+        x1[: len(x0) // 3] += 40 * np.c_[np.cos(angle), np.sin(angle)]  # a third are outliers, 40 px off
+        problems.append((x0, x1))
+    config = HomographyRansacConfig(threshold=3.0)
+    one, two = ransac_batches(problems, config, 0, 1), ransac_batches(problems, config, 0, 2)
+    assert len(one) == len(problems)
+    for a, b, (x0, _) in zip(one, two, problems, strict=True):
+        np.testing.assert_array_equal(a.model, b.model)
+        np.testing.assert_array_equal(a.inliers, b.inliers)
+        assert a.inliers[len(x0) // 3:].all() and not a.inliers[: len(x0) // 3].any()
 
 
 def test_translate_features_moves_centres_only():

@@ -9,6 +9,7 @@ draw up to one batch more models than a strictly sequential RANSAC would.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TypeVar
 
@@ -269,7 +270,7 @@ def _finish_homography(
 def ransac_homography_many(
     problems: list[tuple[np.ndarray, np.ndarray]],
     config: HomographyRansacConfig | dict | None = None,
-    seed: int | None = 0,
+    seed: int | Sequence[int] | None = 0,
 ) -> list[GeometryResult]:
     """Planar homography RANSAC on many independent problems at once (Slime's block pairs).
 
@@ -283,7 +284,7 @@ def ransac_homography_many(
     Args:
         problems: list of (x0 (K_i, 2), x1 (K_i, 2)) pixel correspondences.
         config: options (dataclass, dict or None for the paper defaults).
-        seed: seed of the numpy generator shared by all problems (None: nondeterministic).
+        seed: seed (or seed sequence) of the numpy generator shared by all problems (None: nondeterministic).
 
     Returns:
         One GeometryResult per problem (kind "homography"; model None and no inliers when no

@@ -274,6 +274,19 @@ def match_pairs(pipeline: BasePipeline, pairs: list[tuple[int, int]], get0: Pair
                     8 * workers)
 
 
+RANSAC_BATCH = 50  # block pairs per batched RANSAC: a fixed split, so results do not depend on the workers
+
+
+def ransac_batches(problems: list[tuple[np.ndarray, np.ndarray]], config: HomographyRansacConfig, seed: int,
+                   workers: int = 1) -> list:
+    """``ransac_homography_many`` on consecutive batches of ``RANSAC_BATCH`` problems (batch b seeded with
+    (seed, b)), spread over ``workers`` forked processes; the same results for any number of workers."""
+    starts = range(0, len(problems), RANSAC_BATCH)
+    parts = fork_map(lambda b: ransac_homography_many(problems[starts[b]:starts[b] + RANSAC_BATCH], config,
+                                                      seed=[seed, b]), len(starts), workers, len(starts))
+    return [result for part in parts for result in part]
+
+
 def match_block_pairs(
     pipeline: BasePipeline,
     levels0: list[ScaleLevel],
@@ -311,8 +324,7 @@ def match_block_pairs(
 
     # 3.2: the base pipeline with its own orientations, then RANSAC.
     first = match_pairs(pipeline, pairs, own0, own1, blocks0, blocks1, workers)
-    results = ransac_homography_many([_positions(own0(p), own1(p), m) for p, m in zip(pairs, first)], ransac,
-                                     seed=seed)
+    results = ransac_batches([_positions(own0(p), own1(p), m) for p, m in zip(pairs, first)], ransac, seed, workers)
     thetas = {}
     for pair, m, res in zip(pairs, first, results):
         if res.model is None or res.inliers.sum() < min_matches:
@@ -350,8 +362,8 @@ def match_block_pairs(
         return fixed_block(1, pair[1], bin_of[pair])
 
     second = match_pairs(pipeline, refined_pairs, fixed0, fixed1, blocks0, blocks1, workers)
-    results = ransac_homography_many([_positions(fixed0(p), fixed1(p), m) for p, m in zip(refined_pairs, second)],
-                                     ransac, seed=seed + 1)
+    results = ransac_batches([_positions(fixed0(p), fixed1(p), m) for p, m in zip(refined_pairs, second)], ransac,
+                             seed + 1, workers)
 
     keep_pairs, hs, theta_out, parts = [], [], [], []
     for pair, m, res in zip(refined_pairs, second, results):
@@ -401,6 +413,7 @@ __all__ = [
     "fork_map",
     "match_block_pairs",
     "orientation_bin",
+    "ransac_batches",
     "to_block_frame",
     "translate_features",
 ]
