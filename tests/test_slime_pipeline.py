@@ -21,7 +21,7 @@ from slime_match.slime.pipeline import (
     empty_result_reason,
     layout_warning,
 )
-from slime_match.slime.refine import FlowGuide, global_dtm
+from slime_match.slime.refine import FlowGuide, cluster_representatives, global_dtm
 from slime_match.slime.tiles import TileConfig
 
 WEIGHT_FREE = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift"}
@@ -86,6 +86,30 @@ def test_global_dtm_merges_exact_duplicates():
     rows = np.hstack([k0, k1])
     assert len(np.unique(rows, axis=0)) == len(rows) and len(rows) > 250
     assert np.all(np.diff(s) >= 0)
+
+
+def test_cluster_representatives_and_shared_verdicts():
+    """Matches in the same 2 px cell at both ends form one cluster, represented by its best-scored match; in
+    global_dtm the members of a cluster share its verdict (kept or dropped together)."""
+    xy0 = np.array([[10.2, 10.1], [11.9, 10.4], [10.5, 11.5], [30.0, 30.0], [10.2, 10.1]])
+    xy1 = np.array([[20.0, 20.0], [20.5, 21.0], [25.0, 20.0], [40.0, 40.0], [20.1, 20.2]])
+    scores = np.array([0.5, 0.2, 0.1, 0.3, 0.4])
+    rep, cluster = cluster_representatives(xy0, xy1, scores)
+    assert cluster[0] == cluster[1] == cluster[4] and len({cluster[0], cluster[2], cluster[3]}) == 3
+    assert sorted(rep.tolist()) == [1, 2, 3]  # the best-scored member of each cluster
+    rng = np.random.default_rng(4)
+    x0 = rng.uniform(5, 195, (200, 2))
+    x1 = x0 + [10.0, 5.0]
+    near0, near1 = x0[:80] + rng.uniform(-0.4, 0.4, (80, 2)), x1[:80] + rng.uniform(-0.4, 0.4, (80, 2))
+    k0, k1, _ = global_dtm(np.vstack([x0, near0]), np.vstack([x1, near1]), rng.uniform(0, 1, 280), (220, 220),
+                           (220, 220), x0, x1)
+    kept = {tuple(r) for r in np.round(np.hstack([k0, k1]), 6)}
+    both = np.round(np.hstack([np.vstack([x0, near0]), np.vstack([x1, near1])]), 6)
+    _, member = cluster_representatives(np.vstack([x0, near0]), np.vstack([x1, near1]), np.zeros(280))
+    for c in np.unique(member):
+        verdicts = {tuple(r) in kept for r in both[member == c]}
+        assert len(verdicts) == 1
+    assert len(k0) > 250
 
 
 def test_torch_threads_restores_setting():
