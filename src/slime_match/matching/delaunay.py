@@ -83,7 +83,6 @@ def _legalize(p, tri, nbr, stack, top):
         stack[top, 0], stack[top, 1] = t, 0
         stack[top + 1, 0], stack[top + 1, 1] = n, 0
         top += 2
-    return top
 
 
 @_compiled
@@ -147,22 +146,20 @@ def triangulate(points):
     for v in insertion_order(points, y0, strip):
         if v == c0 or v == c1 or v == c2 or v == c3:
             continue
-        # visibility walk to the triangle holding v (inside or on an edge)
-        while True:
-            moved = False
+        # visibility walk to the triangle holding v, noting the edges v lies on (two: v is a corner)
+        moved = True
+        while moved:
+            moved, on_edge, n_on = False, -1, 0
             for k in range(3):
-                if _orient(points, tri[cur, _NEXT[k]], tri[cur, _PREV[k]], v) < 0:
+                side = _orient(points, tri[cur, _NEXT[k]], tri[cur, _PREV[k]], v)
+                if side < 0:
                     cur = nbr[cur, k]
                     moved = True
                     break
-            if not moved:
-                break
-        on_edge = -1
-        for k in range(3):
-            if _orient(points, tri[cur, _NEXT[k]], tri[cur, _PREV[k]], v) == 0:
-                if on_edge >= 0:
-                    return tri[:0], nbr[:0], 2
-                on_edge = k
+                if side == 0:
+                    on_edge, n_on = k, n_on + 1
+        if n_on > 1:
+            return tri[:0], nbr[:0], 2
         t = cur
         if on_edge < 0:  # split t = (a, b, c) into (a, b, v), (b, c, v), (c, a, v)
             a, b, c = tri[t, 0], tri[t, 1], tri[t, 2]

@@ -114,10 +114,18 @@ def match_tiles(
 def merge_duplicates(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray) -> tuple[np.ndarray, np.ndarray,
                                                                                   np.ndarray]:
     """Matches (K, 2), (K, 2), (K,) without exact duplicates (the best-scored one kept), in input order."""
-    order = np.argsort(scores, kind="stable")
-    _, first = np.unique(np.round(np.hstack([xy0, xy1])[order], 4), axis=0, return_index=True)
-    unique = np.sort(order[first])
+    unique = np.sort(_best_per_group(np.round(np.hstack([xy0, xy1]), 4), scores)[0])
     return xy0[unique], xy1[unique], scores[unique]
+
+
+def _best_per_group(keys: np.ndarray, scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows (K, D) grouped by equal keys: (G,) index of each group's best-scored row (ties: the first), groups
+    in ascending key order, and (K,) group of each row."""
+    order = np.argsort(scores, kind="stable")
+    _, first, group = np.unique(keys[order], axis=0, return_index=True, return_inverse=True)
+    of_row = np.empty(len(keys), np.int64)
+    of_row[order] = group.reshape(-1)
+    return order[first], of_row
 
 
 CLUSTER_CELL = 2.0  # px: matches in the same cell of this grid in both images are one match for the global DTM
@@ -131,12 +139,7 @@ def cluster_representatives(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray
     Returns:
         (C,) index of each cluster's best-scored match, (K,) cluster of each match.
     """
-    keys = np.floor(np.hstack([xy0, xy1]) / cell).astype(np.int64)
-    _, cluster = np.unique(keys, axis=0, return_inverse=True)
-    cluster = cluster.reshape(-1)
-    order = np.lexsort((scores, cluster))  # by cluster, then score
-    first = order[np.r_[True, cluster[order][1:] != cluster[order][:-1]]]
-    return first, cluster
+    return _best_per_group(np.floor(np.hstack([xy0, xy1]) / cell).astype(np.int64), scores)
 
 
 def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size1, keypoints0: np.ndarray,
