@@ -15,7 +15,9 @@ from slime_match.io import load_image
 from slime_match.matcher import Matcher
 from slime_match.pipelines import BaseConfig, make_base_pipeline
 from slime_match.slime.block_matching import (
+    LevelRequest,
     build_levels,
+    build_levels_many,
     describe_fixed_bins,
     fixed_features,
     fork_map,
@@ -111,6 +113,23 @@ def test_fork_map_and_forked_descriptors_equal_one_process(levels):
         describe_fixed_bins(pipeline, wanted, 16, workers)
         out.append([fixed_features(lv, index, b, 16).descriptors for lv, bins in wanted for b, index in bins.items()])
     assert all(torch.equal(a, b) for a, b in zip(*out, strict=True))
+
+
+def test_forked_detections_equal_one_process(levels):
+    """Shared and per-block requests of two images (blocks and tiles' regions) detected by 1 or 2 workers:
+    the same levels, in request order, scales and blocks in order."""
+    pipeline, blocks, _, _, _ = levels
+    image, _ = _squares()
+    requests = [LevelRequest(image, blocks), LevelRequest(image[::-1].copy(), blocks, shared=False),
+                LevelRequest(image, blocks, regions_only=True)]
+    one, two = (build_levels_many(pipeline, requests, workers) for workers in (1, 2))
+    assert [[lv.blocks for lv in r] for r in two] == [[[0, 1]], [[0], [1]], [[0, 1]]]
+    assert two[2][0].features.descriptors.shape[1] == 0 and two[0][0].features.descriptors.shape[1] > 0
+    flat = ([lv for r in levels_of for lv in r] for levels_of in (one, two))
+    for a, b in zip(*flat, strict=True):
+        assert a.origin == b.origin and all(np.array_equal(x, y) for x, y in zip(a.members, b.members, strict=True))
+        for name in ("laf", "descriptors", "response", "shape_laf"):
+            assert torch.equal(getattr(a.features, name), getattr(b.features, name)), name
 
 
 def test_ransac_batches_do_not_depend_on_the_workers():

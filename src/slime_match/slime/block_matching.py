@@ -4,8 +4,9 @@ Speed by design (the paper's SM "Slime running time"): keypoints, shapes and des
 once per image and block scale on the whole scaled image and shared by every block that contains the
 keypoint (a block owns the keypoints of its core, i.e. the block minus its 32 px padding); descriptors
 under a fixed orientation are computed once per (scale, orientation bin) and only for the keypoints that
-a block pair needs; RANSACs of all block pairs run as one batch.  ``build_levels(shared=False)`` is the
-paper prototype's alternative: each block crop (zero-padded box) is detected and described on its own.
+a block pair needs; RANSACs of all block pairs run as one batch; the detections, block pairs and RANSAC
+batches are spread over forked worker processes.  ``LevelRequest(shared=False)`` is the paper prototype's
+alternative: each block crop (zero-padded box) is detected and described on its own.
 """
 
 from __future__ import annotations
@@ -93,51 +94,110 @@ def _detect(pipeline: BasePipeline, context: Any, regions_only: bool) -> Feature
     return pipeline.detect_regions(context) if regions_only else pipeline.detect(context)
 
 
-def _block_level(pipeline: BasePipeline, scaled: np.ndarray, index: int, block: Block,
-                 regions_only: bool) -> ScaleLevel:
-    """One block detected on its own crop; its core's features moved to scaled-image pixels."""
-    context = pipeline.prepare(block.crop(scaled))
-    local = _detect(pipeline, context, regions_only)
-    inside = block.in_core_local(local.xy.detach().cpu().numpy())
-    origin = (float(block.box[0]), float(block.box[1]))
-    features = translate_features(local.subset(torch.from_numpy(inside).to(local.laf.device)), origin)
-    return ScaleLevel(block.factor, scaled.shape[:2], context, features, [index],
-                      [np.arange(len(features))], origin=origin)
+def _features_to_numpy(features: Features) -> tuple[np.ndarray | None, ...]:
+    """The arrays of features (CPU numpy), to send from a forked worker: torch would pickle shared memory."""
+    return tuple(None if t is None else t.detach().cpu().numpy() for t in
+                 (features.laf, features.descriptors, features.response, features.shape_laf))
 
 
-def build_levels(pipeline: BasePipeline, image: np.ndarray, blocks: list[Block],
-                 regions_only: bool = False, shared: bool = True) -> list[ScaleLevel]:
-    """Detect and describe the blocks: once per block scale on the whole (Lanczos-)scaled image, or per block.
+def _features_from_numpy(arrays: tuple[np.ndarray | None, ...], device: torch.device) -> Features:
+    return Features(*(None if a is None else torch.from_numpy(a).to(device) for a in arrays))
 
-    Args:
-        pipeline: the base pipeline.
+
+@dataclass
+class LevelRequest:
+    """One image's blocks (or tiles) to detect, for ``build_levels_many``.
+
+    Attributes:
         image: (H, W, 3) float image.
-        blocks: the image's blocks (``make_blocks``).
+        blocks: its blocks (``make_blocks``) or tiles (``make_tiles``).
         regions_only: keep only the shape frames (no own orientation or descriptors): enough for regions
             that are only described under fixed orientations (the tiles, Sec. 3.8).
         shared: True: one detection per scale shared by its blocks (each block owns the keypoints of its
             core). False (the paper prototype): each block's zero-padded crop is detected and described on
             its own and keeps the keypoints of its core.
+    """
+
+    image: np.ndarray
+    blocks: list[Block]
+    regions_only: bool = False
+    shared: bool = True
+
+
+@dataclass
+class _Detection:
+    """One detection to run: a whole scaled image (``block`` None) or one block crop of it."""
+
+    request: int
+    blocks: list[int]
+    scaled: np.ndarray
+    context: Any
+    block: Block | None
+
+
+def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], workers: int = 1
+                      ) -> list[list[ScaleLevel]]:
+    """Detect and describe the blocks of several images: once per block scale on the whole (Lanczos-)scaled
+    image, or per block (see ``LevelRequest``).
+
+    The detections (one per image and scale, or per block) run in ``workers`` forked processes, the largest
+    first; each runs single-threaded torch, as in one process, so the features do not depend on ``workers``.
 
     Returns:
-        Shared: one ScaleLevel per distinct block scale, in increasing scale index. Per block: one
-        ScaleLevel per block, in block order. Features are in scaled-image pixels either way.
+        Per request: shared, one ScaleLevel per distinct block scale, in increasing scale index; per block,
+        one ScaleLevel per block, in block order. Features are in scaled-image pixels either way.
     """
-    levels = []
-    for scale_index in sorted({b.scale_index for b in blocks}):
-        members_blocks = [i for i, b in enumerate(blocks) if b.scale_index == scale_index]
-        factor = blocks[members_blocks[0]].factor
-        scaled = resize_lanczos(image, factor)
-        if not shared:
-            levels += [_block_level(pipeline, scaled, i, blocks[i], regions_only) for i in members_blocks]
-            continue
-        context = pipeline.prepare(scaled)
-        features = _detect(pipeline, context, regions_only)
-        original = blocks[members_blocks[0]].to_original(features.xy.detach().cpu().numpy())
-        inside = points_in_blocks(original, [blocks[i] for i in members_blocks])
-        members = [inside.indices[inside.indptr[k]:inside.indptr[k + 1]] for k in range(len(members_blocks))]
-        levels.append(ScaleLevel(factor, scaled.shape[:2], context, features, members_blocks, members))
+    detections = []
+    for r, request in enumerate(requests):
+        blocks = request.blocks
+        for scale_index in sorted({b.scale_index for b in blocks}):
+            members_blocks = [i for i, b in enumerate(blocks) if b.scale_index == scale_index]
+            scaled = resize_lanczos(request.image, blocks[members_blocks[0]].factor)
+            if request.shared:
+                detections.append(_Detection(r, members_blocks, scaled, pipeline.prepare(scaled), None))
+            else:
+                detections += [_Detection(r, [i], scaled, pipeline.prepare(blocks[i].crop(scaled)), blocks[i])
+                               for i in members_blocks]
+    order = sorted(range(len(detections)), key=lambda k: -detections[k].scaled.size if detections[k].block is None
+                   else -np.prod(detections[k].block.shape))
+    forked = workers > 1
+
+    def detect(k: int) -> Features | tuple:
+        d = detections[order[k]]
+        features = _detect(pipeline, d.context, requests[d.request].regions_only)
+        return _features_to_numpy(features) if forked else features
+
+    found: list[Any] = [None] * len(detections)
+    with torch_threads(1):  # as in a worker: the same float rounding for any number of workers
+        for k, result in zip(order, fork_map(detect, len(order), workers, len(order))):
+            found[k] = result
+    levels: list[list[ScaleLevel]] = [[] for _ in requests]
+    for d, features in zip(detections, found):
+        if forked:
+            features = _features_from_numpy(features, getattr(pipeline, "device", torch.device("cpu")))
+        levels[d.request].append(_level(d, features, requests[d.request].blocks))
     return levels
+
+
+def _level(d: _Detection, features: Features, blocks: list[Block]) -> ScaleLevel:
+    """The ScaleLevel of one detection: the scale's blocks and the features each owns (its core's)."""
+    factor = blocks[d.blocks[0]].factor
+    if d.block is not None:  # a block crop: keep its core's features, in scaled-image pixels
+        inside = d.block.in_core_local(features.xy.detach().cpu().numpy())
+        origin = (float(d.block.box[0]), float(d.block.box[1]))
+        features = translate_features(features.subset(torch.from_numpy(inside).to(features.laf.device)), origin)
+        return ScaleLevel(factor, d.scaled.shape[:2], d.context, features, d.blocks, [np.arange(len(features))],
+                          origin=origin)
+    original = blocks[d.blocks[0]].to_original(features.xy.detach().cpu().numpy())
+    inside = points_in_blocks(original, [blocks[i] for i in d.blocks])
+    members = [inside.indices[inside.indptr[k]:inside.indptr[k + 1]] for k in range(len(d.blocks))]
+    return ScaleLevel(factor, d.scaled.shape[:2], d.context, features, d.blocks, members)
+
+
+def build_levels(pipeline: BasePipeline, image: np.ndarray, blocks: list[Block],
+                 regions_only: bool = False, shared: bool = True, workers: int = 1) -> list[ScaleLevel]:
+    """``build_levels_many`` for one image (see ``LevelRequest`` for the arguments)."""
+    return build_levels_many(pipeline, [LevelRequest(image, blocks, regions_only, shared)], workers)[0]
 
 
 def orientation_bin(angle: float, bins: int) -> int:
@@ -406,8 +466,10 @@ def _collect(pairs, hs, thetas, parts) -> BlockPairMatches:
 
 __all__ = [
     "BlockPairMatches",
+    "LevelRequest",
     "ScaleLevel",
     "build_levels",
+    "build_levels_many",
     "describe_fixed_bins",
     "fixed_features",
     "fork_map",

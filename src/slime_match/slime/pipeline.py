@@ -20,7 +20,13 @@ from ..geometry.homography import project
 from ..geometry.ransac import HomographyRansacConfig
 from ..pipelines import BasePipeline
 from ..timing import StageTimer
-from .block_matching import BlockPairMatches, build_levels, match_block_pairs, torch_threads
+from .block_matching import (
+    BlockPairMatches,
+    LevelRequest,
+    build_levels_many,
+    match_block_pairs,
+    torch_threads,
+)
 from .blocks import Block, BlockConfig, make_blocks, make_tiles
 from .planes import MatchTable, PlaneConfig, deduplicate, expand_planes
 from .refine import FlowGuide, global_dtm, match_tiles, merge_duplicates
@@ -51,7 +57,8 @@ class SlimeConfig:
         bins: orientation histogram bins of the block-pair refinement (16).
         min_plane_matches: a block pair yields a plane only with at least this many RANSAC inliers
             (ours: the paper does not state a minimum; 4 would be any minimal sample).
-        workers: processes for the block-pair matching (None = one per CPU core on CPU, 1 on CUDA).
+        workers: processes for the detections, block pairs and tiles (None = one per CPU core on CPU, 1 on
+            CUDA).
         refine_tiles: run Sec. 3.8 (tile re-matching + global DTM); False stops at F^theta.
         global_dtm: the final DTM on the union of F^theta and tile matches (Sec. 3.8); None: the base
             pipeline's ``slime_global_dtm`` (the paper's Slimed Key.Net runs none). Exact duplicates are merged
@@ -209,14 +216,18 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     layout = layout_warning(len(blocks0), len(blocks1))
     if layout:
         warn(layout)
-    with timer("features"):
-        shared = config.shared_detection
-        levels0 = build_levels(pipeline, image0, blocks0, shared=shared)
-        levels1 = build_levels(pipeline, image1, blocks1, shared=shared)
+    workers = _workers(config.workers, pipeline)
+    with timer("features"):  # the tiles' regions too (Sec. 3.8), so that all detections share the workers
+        requests = [LevelRequest(image0, blocks0, shared=config.shared_detection),
+                    LevelRequest(image1, blocks1, shared=config.shared_detection)]
+        if config.refine_tiles:
+            requests += [LevelRequest(image, tiles, regions_only=True, shared=config.shared_tile_detection)
+                         for image, tiles in ((image0, tiles0), (image1, tiles1))]
+        levels0, levels1, *tile_levels = build_levels_many(pipeline, requests, workers)
     with timer("block_pairs"), torch_threads(1):
         bpm, counts = match_block_pairs(pipeline, levels0, levels1, blocks0, blocks1, config.ransac,
                                         bins=config.bins, min_matches=config.min_plane_matches, seed=seed,
-                                        workers=_workers(config.workers, pipeline))
+                                        workers=workers)
     raw_table, h, side = block_planes_to_original(bpm, blocks0, blocks1)
     table, _ = deduplicate(raw_table)
     counts.update(block_matches=len(raw_table), block_matches_unique=len(table))
@@ -233,17 +244,13 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     guide_xy0, guide_xy1 = table.xy0[in_ftheta], table.xy1[in_ftheta]
     tile_xy0 = tile_xy1 = np.zeros((0, 2))
     tile_scores = np.zeros(0)
-    tile_levels0 = tile_levels1 = []
+    tile_levels0, tile_levels1 = tile_levels or ([], [])
     if config.refine_tiles and len(ftheta):
-        with timer("features"):
-            shared = config.shared_tile_detection
-            tile_levels0 = build_levels(pipeline, image0, tiles0, regions_only=True, shared=shared)
-            tile_levels1 = build_levels(pipeline, image1, tiles1, regions_only=True, shared=shared)
         with timer("tile_refinement"), torch_threads(1):
             guide = FlowGuide(guide_xy0, guide_xy1, config.planes.t_perp)
             tile_xy0, tile_xy1, tile_scores = match_tiles(
                 pipeline, tile_levels0, tile_levels1, tiles0, tiles1, np.stack([ftheta.tile0, ftheta.tile1], 1),
-                selected["theta"], guide, bins=config.tiles.bins, workers=_workers(config.workers, pipeline))
+                selected["theta"], guide, bins=config.tiles.bins, workers=workers)
     counts["tile_matches"] = len(tile_xy0)
     with timer("global_dtm"):
         all0 = np.vstack([guide_xy0, tile_xy0])
