@@ -121,11 +121,57 @@ def test_expand_planes_plane_side_and_literal_scale_mode():
         PlaneConfig(relative_scale="nope")
 
 
-def test_expand_planes_chunking_is_invariant():
-    t, h, _, _ = _scene()
-    rng = np.random.default_rng(3)
-    hs = np.concatenate([h, h + rng.normal(0, 1e-3, h.shape) * [[1, 1, 100]] * 0.01, h[::-1]])
-    ref = expand_planes(t, hs, np.ones(len(hs))).toarray()
-    small = expand_planes(t, hs, np.ones(len(hs)), PlaneConfig(chunk=50)).toarray()
-    np.testing.assert_array_equal(ref, small)
-    np.testing.assert_array_equal(ref[4], ref[1])
+def _expand_reference(t, h, side, config):
+    """Sec. 3.4 pair by pair, as the expand_planes docstring states it (slow, plain Python)."""
+    steps = [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)]
+
+    def apply(m, x):
+        q = m @ np.array([x[0], x[1], 1.0])
+        return q[:2] / q[2], q[2]
+
+    def local(m, x, rho, psi):
+        qx, _ = apply(m, x)
+        rot = scale = False
+        for dx, dy in steps:
+            d = apply(m, (x[0] + dx, x[1] + dy))[0] - qx
+            diff = rho - (math.atan2(d[1], d[0]) - math.atan2(dy, dx))
+            rot |= abs(math.remainder(diff, 2 * math.pi)) < config.t_theta
+            scale |= 1 / config.t_sigma <= math.hypot(*d) / psi <= config.t_sigma
+        return rot, scale
+
+    out = np.zeros((len(h), len(t)), bool)
+    for l, m in enumerate(h):
+        for i in range(len(t)):
+            x0, x1 = t.xy0[i], t.xy1[i]
+            q1, w = apply(m, x0)
+            q0, _ = apply(np.linalg.inv(m), x1)
+            if max(np.linalg.norm(q1 - x1), np.linalg.norm(q0 - x0)) >= config.t_perp or np.sign(w) != side[l]:
+                continue
+            psi = t.scale1[i] / t.scale0[i] if config.relative_scale == "patch" else 1.0
+            rot0, sc0 = local(m, x0, t.rho[i], psi)
+            rot1, sc1 = local(np.linalg.inv(m), x1, -t.rho[i], 1 / psi)
+            out[l, i] = (rot0 or rot1) and (sc0 or sc1)
+    return out
+
+
+@pytest.mark.parametrize("mode", ["patch", "homography"])
+def test_expand_planes_equals_the_pair_by_pair_rule(mode):
+    """Random matches around 8 nearby planes (some seen from the other side): the compiled pass gives the
+    memberships of the plain rule (thousands of them: the output buffers grow)."""
+    g = np.random.default_rng(4)
+    m = 600
+    base = np.array([[1.1, 0.1, 20.0], [-0.05, 0.9, 10.0], [2e-4, -1e-4, 1.0]])
+    h = np.stack([base + g.normal(0, 1, (3, 3)) * [[0.02, 0.02, 3.0], [0.02, 0.02, 3.0], [1e-5, 1e-5, 0]]
+                  for _ in range(8)])
+    xy0 = g.uniform(0, 400, (m, 2))
+    y = np.c_[xy0, np.ones(m)] @ base.T
+    xy1 = y[:, :2] / y[:, 2:] + g.normal(0, 8, (m, 2))
+    angle0 = g.uniform(-np.pi, np.pi, m)
+    t = _table(xy0, xy1, angle0, angle0 + g.normal(0, 1.0, m), np.ones(m), np.exp(g.normal(0, 1.0, m)))
+    side = np.array([1, 1, 1, -1, 1, 1, 1, 1.0])
+    config = PlaneConfig(relative_scale=mode)
+    got = expand_planes(t, h, side, config)
+    ref = _expand_reference(t, h, side, config)
+    assert 1024 < ref.sum() < ref.size - 600 and not ref[3].any()
+    np.testing.assert_array_equal(got.toarray(), ref)
+    assert got.has_canonical_format

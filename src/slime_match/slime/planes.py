@@ -24,6 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from slime_match.errors import ConfigError
+from slime_match.slime import plane_kernels
 
 __all__ = [
     "MatchTable",
@@ -38,8 +39,6 @@ __all__ = [
 log = logging.getLogger("slime_match")
 
 _RELATIVE_SCALE_MODES = ("patch", "homography")
-# directions atan2(n - x) of the 4-connected neighbours n = x + (1,0), (0,1), (-1,0), (0,-1)
-_STEP_ANGLES = np.array([0.0, math.pi / 2, math.pi, -math.pi / 2])
 
 
 @dataclass
@@ -52,23 +51,20 @@ class PlaneConfig:
         t_sigma: relative scale tolerance (ratio).
         relative_scale: "patch" (compare psi^H_n with the patch ratio psi) or "homography" (the paper's
             literal equation: bound psi^H_n alone), see the module docstring.
-        chunk: number of (plane, match) pairs evaluated at once by the reprojection pre-filter (cache-sized
-            by default: 3x faster than millions at once).
     """
 
     t_perp: float = 15.0
     t_theta: float = 3.0 * math.pi / 8.0
     t_sigma: float = 3.0
     relative_scale: str = "patch"
-    chunk: int = 1 << 18
 
     def __post_init__(self) -> None:
         if self.relative_scale not in _RELATIVE_SCALE_MODES:
             raise ConfigError(
                 f"unknown relative_scale {self.relative_scale!r}; choose one of {_RELATIVE_SCALE_MODES}"
             )
-        if self.t_perp <= 0 or self.t_theta <= 0 or self.t_sigma < 1 or self.chunk < 1:
-            raise ConfigError("PlaneConfig: need t_perp > 0, t_theta > 0, t_sigma >= 1, chunk >= 1")
+        if self.t_perp <= 0 or self.t_theta <= 0 or self.t_sigma < 1:
+            raise ConfigError("PlaneConfig: need t_perp > 0, t_theta > 0, t_sigma >= 1")
 
 
 @dataclass
@@ -203,63 +199,6 @@ def relative_orientation(
     return float(group_relative_orientation(rho, np.zeros(len(rho), np.int64), 1, bins, weights)[0])
 
 
-def _candidates(
-    xy0: np.ndarray, xy1: np.ndarray, h: np.ndarray, side: np.ndarray, t_perp: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """(plane, match) pairs whose forward error |x' - H x| is below ``t_perp`` with the right plane side.
-
-    The cheap pre-filter: float32, no division (``|x' w - (H x)_{1,2}| < t |w|``), first on the x coordinate
-    over the whole (planes x matches) grid, then on y for the survivors only.  A 1 px margin absorbs the
-    float32 rounding; the exact float64 tests follow in :func:`expand_planes`.
-
-    Args:
-        xy0: (M, 2) float32 points in image 1.
-        xy1: (M, 2) float32 points in image 2.
-        h: (C, 3, 3) homographies of a chunk of planes.
-        side: (C,) their plane sides (+1/-1).
-        t_perp: reprojection threshold in px.
-
-    Returns:
-        (K,) plane indices in [0, C) (sorted) and (K,) match indices.
-    """
-    x, y, u, v = xy0[:, 0], xy0[:, 1], xy1[:, 0], xy1[:, 1]
-    hf = (h * side[:, None, None]).astype(np.float32)  # then w > 0 on the plane's side
-    tol = np.float32(t_perp + 1.0)
-    hc = hf[:, :, :, None]
-    w = hc[:, 2, 0] * x + hc[:, 2, 1] * y + hc[:, 2, 2]
-    ex = hc[:, 0, 0] * x + hc[:, 0, 1] * y + hc[:, 0, 2] - u * w
-    np.abs(ex, out=ex)
-    pl, mi = np.nonzero(ex < tol * w)  # also requires w > 0
-    wk = w[pl, mi]
-    ey = hf[pl, 1, 0] * x[mi] + hf[pl, 1, 1] * y[mi] + hf[pl, 1, 2] - v[mi] * wk
-    keep = np.abs(ey) < tol * wk
-    return pl[keep], mi[keep]
-
-
-def _project_local(h: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per-pair homography mapping of a point and of its 4-neighbourhood (coordinates in rows: contiguous,
-    as NumPy is slow on tiny inner dimensions).
-
-    Args:
-        h: (9, K) homographies, row-major entries: ``h[3 i + j] = H_ij``.
-        x: (2, K) points.
-
-    Returns:
-        (2, K) mapped points ``H x``; (K,) third homogeneous coordinate w; (4, K) local rotations
-        ``rho^H_n = atan2(Hn - Hx) - atan2(n - x)`` (radians) and (4, K) local scales ``psi^H_n = |Hn - Hx|``
-        for n = x + (1,0), (0,1), (-1,0), (0,-1).
-    """
-    p = [h[3 * i] * x[0] + h[3 * i + 1] * x[1] + h[3 * i + 2] for i in range(3)]  # homogeneous H x
-    d = np.empty((2, 4, x.shape[1]))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        q = np.stack([p[0] / p[2], p[1] / p[2]])
-        for n, (j, sign) in enumerate(((0, 1.0), (1, 1.0), (0, -1.0), (1, -1.0))):  # n = x + sign e_j
-            pn = [p[i] + sign * h[3 * i + j] for i in range(3)]  # H n = H x + sign H e_j
-            d[0, n] = pn[0] / pn[2] - q[0]
-            d[1, n] = pn[1] / pn[2] - q[1]
-    return q, p[2], np.arctan2(d[1], d[0]) - _STEP_ANGLES[:, None], np.hypot(d[0], d[1])
-
-
 def expand_planes(
     table: MatchTable, h: np.ndarray, side: np.ndarray, config: PlaneConfig | None = None
 ) -> sp.csr_matrix:
@@ -289,37 +228,9 @@ def expand_planes(
     n_planes, n_matches = len(h), len(table)
     if n_planes == 0 or n_matches == 0:
         return sp.csr_matrix((n_planes, n_matches), dtype=bool)
-    hinv = np.linalg.inv(h)
-    h9, hinv9 = np.ascontiguousarray(h.reshape(-1, 9).T), np.ascontiguousarray(hinv.reshape(-1, 9).T)  # (9, L)
-    xy0, xy1 = table.xy0.astype(np.float32), table.xy1.astype(np.float32)
-    xy0t, xy1t = np.ascontiguousarray(table.xy0.T), np.ascontiguousarray(table.xy1.T)  # (2, M)
-    rho_all = table.rho
-    step = max(1, config.chunk // n_matches)
-    rows, cols = [], []
-    # pre-filter on chunks of planes, then the exact tests on the gathered candidates, in float64
-    for a in range(0, n_planes, step):
-        pl, mi = _candidates(xy0, xy1, h[a : a + step], side[a : a + step], config.t_perp)
-        pl += a
-        x0, x1 = xy0t[:, mi], xy1t[:, mi]
-        q0, w0, rot0, sc0 = _project_local(h9[:, pl], x0)
-        q1, _, rot1, sc1 = _project_local(hinv9[:, pl], x1)
-        err = np.maximum(np.hypot(*(q0 - x1)), np.hypot(*(q1 - x0)))
-        rho = rho_all[mi]
-        ok_rot = (np.abs(wrap_angle(rho - rot0)) < config.t_theta).any(0) | (
-            np.abs(wrap_angle(-rho - rot1)) < config.t_theta
-        ).any(0)
-        if config.relative_scale == "patch":
-            psi = table.scale1[mi] / table.scale0[mi]
-            sc0, sc1 = sc0 / psi, sc1 * psi
-        with np.errstate(invalid="ignore"):
-            ok_sc = ((sc0 >= 1.0 / config.t_sigma) & (sc0 <= config.t_sigma)).any(0) | (
-                (sc1 >= 1.0 / config.t_sigma) & (sc1 <= config.t_sigma)
-            ).any(0)
-        keep = (err < config.t_perp) & (np.sign(w0) == side[pl]) & ok_rot & ok_sc
-        rows.append(pl[keep])
-        cols.append(mi[keep])
-    pl, mi = np.concatenate(rows), np.concatenate(cols)
+    psi = table.scale1 / table.scale0 if config.relative_scale == "patch" else np.ones(n_matches)
+    pl, mi = plane_kernels.expansion_pairs(h.reshape(-1, 9), np.linalg.inv(h).reshape(-1, 9), side, table.xy0,
+                                           table.xy1, table.rho, psi, config.t_perp, config.t_theta, config.t_sigma)
     log.debug("expand_planes: %d planes x %d matches -> %d memberships", n_planes, n_matches, len(pl))
-    out = sp.csr_matrix((np.ones(len(pl), dtype=bool), (pl, mi)), shape=(n_planes, n_matches))
-    out.sort_indices()
-    return out
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(pl, minlength=n_planes))])  # pl is ascending
+    return sp.csr_matrix((np.ones(len(pl), dtype=bool), mi, indptr), shape=(n_planes, n_matches))
