@@ -14,11 +14,11 @@ from slime_match.geometry.ransac import (
     FundamentalRansacConfig,
     HomographyRansacConfig,
     _has_far_quadruple,
-    _min_pair_distance,
     ransac_fundamental,
     ransac_homography,
     ransac_homography_many,
 )
+from slime_match.geometry.ransac_kernels import far_samples
 
 H_TRUE = np.array([[1.1, 0.05, 20.0], [-0.03, 0.95, -10.0], [1e-4, 2e-4, 1.0]])
 K_CAM = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
@@ -115,7 +115,7 @@ def test_has_far_quadruple_brute_force():
         for spread in (20.0, 40.0, 80.0):
             x = rng.uniform(0, spread, (n, 4))
             samples = np.array(list(itertools.combinations(range(n), 4)))
-            ref = bool((_min_pair_distance(x[samples]) > 15.0).any())
+            ref = bool(far_samples(x, np.zeros(len(samples), np.int64), samples, 15.0).any())
             assert _has_far_quadruple(x, 15.0) == ref, (n, spread)
 
 

@@ -22,14 +22,13 @@ from slime_match.geometry.fundamental import (
     fundamental_8point_batch,
     fundamental_from_homography_and_parallax_batch,
 )
-from slime_match.geometry.homography import _inverse, homography_dlt, homography_dlt_batch
+from slime_match.geometry.homography import homography_dlt, homography_dlt_batch
+from slime_match.geometry.ransac_kernels import far_samples, inlier_counts, inlier_mask, minimal_homographies
 from slime_match.geometry.sampling import sample_subsets, sample_subsets_varying
 from slime_match.options import config_from_dict
 from slime_match.types import GeometryResult
 
 logger = logging.getLogger("slime_match")
-
-_CACHE_ELEMENTS = 1 << 16  # models x points scored per step by the batched homography RANSAC (cache-sized)
 
 
 @dataclass
@@ -46,7 +45,8 @@ class HomographyRansacConfig:
             this are degenerate.
         batch: models drawn and scored together per problem and round.
         refine: refit the best model by least-squares DLT on its inliers (kept only if no inlier is lost).
-        max_elements: bound on models x points scored at once (memory).
+        max_elements: unused (the models are scored in a compiled loop, without large arrays); kept for
+            configuration compatibility.
     """
 
     threshold: float = 15.0
@@ -129,14 +129,8 @@ def _pair_gap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.sqrt(np.minimum(d[..., 0] + d[..., 1], d[..., 2] + d[..., 3]))
 
 
-def _min_pair_distance(x: np.ndarray) -> np.ndarray:
-    """(M,) smallest distance between two correspondences of each (M, k, 4) sample, in either image."""
-    i, j = np.triu_indices(x.shape[1], 1)
-    return _pair_gap(x[:, i], x[:, j]).min(axis=1)
-
-
 def _has_far_quadruple(x: np.ndarray, t: float) -> bool:
-    """Whether some 4 of the (n, 4) correspondences pass the sample distance test (``_min_pair_distance > t``).
+    """Whether some 4 of the (n, 4) correspondences pass the sample distance test (``far_samples``).
 
     Such a sample is a 4-clique of the graph joining the pairs farther than t apart: an edge (i, j) whose
     common neighbours hold an edge. Memory and time grow as n^3 and n^4: meant for small n.
@@ -153,59 +147,15 @@ def _consistent_side(h: np.ndarray, xs: np.ndarray) -> np.ndarray:
     return np.where((s == s[:, :1]).all(axis=1), s[:, 0], 0.0)
 
 
-def _homography_inlier_mask(
-    h: np.ndarray, side: np.ndarray, x0: np.ndarray, x1: np.ndarray, t: float
-) -> np.ndarray:
-    """(B, K) inliers of B homographies: two-sided error < t and ``side * w > 0``.
-
-    Same test as ``two_sided_error_batch(...) < t`` with the plane side, without divisions or square
-    roots: ``|x1 - p / w| < t`` iff ``|x1 w - p|^2 < t^2 w^2`` for ``p, w = H [x0; 1]``.
-
-    Args:
-        h: (B, 3, 3) homographies; side: (B,) +1/-1; t: pixels.
-        x0, x1: (2, B, K) or (2, K) pixel coordinates, the x row then the y row (contiguous rows are fastest).
-    """
-    t2 = t * t
-    ok = None
-    for m, (ax, ay), (bx, by) in ((h, x0, x1), (_inverse(h), x1, x0)):
-        mm = m[:, :, :, None]  # (B, 3, 3, 1)
-        px, py, w = (mm[:, r, 0] * ax + mm[:, r, 1] * ay + mm[:, r, 2] for r in range(3))  # (B, K) each
-        ex = bx * w - px
-        ey = by * w - py
-        ex *= ex
-        ey *= ey
-        ex += ey
-        close = ex < t2 * w * w
-        ok = close & (w * side[:, None] > 0) if ok is None else ok & close & (w != 0)
-    return ok
-
-
-def _count_homography_inliers(
-    h: np.ndarray, side: np.ndarray, own: np.ndarray, data: _Stack, threshold: float, max_elements: int
-) -> np.ndarray:
-    """(M,) inlier counts of M homographies, model m scored on the points of problem own[m]."""
-    counts = np.zeros(len(h), dtype=np.int64)
-    order = np.argsort(data.n[own], kind="stable")  # similar sizes together: little padding
-    sizes = data.n[own[order]]
-    limit = min(max_elements, _CACHE_ELEMENTS)
-    start = 0
-    while start < len(order):  # chunks of models whose padded block stays under the limit
-        padded = np.arange(1, len(order) - start + 1) * np.maximum(sizes[start:], 1)
-        stop = start + max(1, int(np.searchsorted(padded, limit, side="right")))
-        m = order[start:stop]
-        start = stop
-        xy, valid = data.gather(own[m])
-        counts[m] = (_homography_inlier_mask(h[m], side[m], xy[:2], xy[2:], threshold) & valid).sum(axis=1)
-    return counts
-
-
 def _homography_inliers(h: np.ndarray, side: float, x0: np.ndarray, x1: np.ndarray, t: float) -> np.ndarray:
-    """(K,) inliers of one homography on (K, 2) correspondences."""
-    return _homography_inlier_mask(h[None], np.array([side]), x0.T, x1.T, t)[0]
+    """(K,) inliers of one homography on (K, 2) correspondences: two-sided error < t pixels and the plane side
+    (``side * w > 0`` for ``w`` the third coordinate of ``H [x0; 1]``)."""
+    return inlier_mask(np.ascontiguousarray(h, dtype=np.float64), float(side), np.hstack([x0, x1]), float(t))
 
 
 class _Stack:
-    """Correspondence sets of many problems stored flat, gathered into padded blocks on demand."""
+    """Correspondence sets of many problems stored flat: problem p is rows ``offset[p]`` to ``offset[p] + n[p] - 1``
+    of the (N, 4) rows (x0, y0, x1, y1), pixels."""
 
     def __init__(self, problems: list[tuple[np.ndarray, np.ndarray]]) -> None:
         xs0, xs1 = [], []
@@ -219,9 +169,8 @@ class _Stack:
         self.x0s, self.x1s = xs0, xs1
         self.n = np.array([len(a) for a in xs0], dtype=np.int64)
         self.offset = np.concatenate([[0], np.cumsum(self.n)[:-1]]).astype(np.int64)
-        pad = [np.zeros((1, 2))]  # trailing pad row
-        self.rows = np.hstack([np.concatenate(xs0 + pad), np.concatenate(xs1 + pad)])  # (N + 1, 4): x0 y0 x1 y1
-        self.cols = np.ascontiguousarray(self.rows.T)  # (4, N + 1)
+        empty = [np.zeros((0, 2))]
+        self.rows = np.hstack([np.concatenate(xs0 + empty), np.concatenate(xs1 + empty)])  # (N, 4): x0 y0 x1 y1
 
     def without_far_sample(self, t: float, candidates: np.ndarray, max_n: int = 64) -> np.ndarray:
         """(P,) True for the candidate problems (4 <= n <= max_n) proven to hold no 4 correspondences pairwise
@@ -230,18 +179,6 @@ class _Stack:
         out = np.zeros(len(self.n), dtype=bool)
         out[check] = [not _has_far_quadruple(self.rows[self.offset[p]:self.offset[p] + self.n[p]], t) for p in check]
         return out
-
-    def take(self, own: np.ndarray, idx: np.ndarray) -> np.ndarray:
-        """(M, k, 4) points (x0, y0, x1, y1) at local indices idx (M, k) of problems own (M,)."""
-        return self.rows[self.offset[own, None] + idx]
-
-    def gather(self, own: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """All points of problems own (M,), padded: (4, M, K) coordinate rows x0, y0, x1, y1 and (M, K) validity."""
-        k = int(self.n[own].max(initial=0))
-        local = np.arange(k)
-        valid = local[None] < self.n[own, None]
-        g = np.where(valid, self.offset[own, None] + local[None], self.cols.shape[1] - 1)
-        return self.cols[:, g], valid
 
 
 def _finish_homography(
@@ -311,19 +248,18 @@ def ransac_homography_many(
         own = np.repeat(act, cnt)
         index = sample_subsets_varying(rng, data.n[own], 4)  # drawn for all: the random stream is kept
         drawn = ~hopeless[own]
-        own = own[drawn]
-        s = data.take(own, index[drawn])
-        ok = _min_pair_distance(s) > cfg.min_sample_distance
+        own, index = own[drawn], index[drawn]
+        ok = far_samples(data.rows, data.offset[own], index, float(cfg.min_sample_distance))
         if first_round:  # the small problems none of whose samples passed: is any sample possible at all?
             hopeless = data.without_far_sample(cfg.min_sample_distance, np.bincount(own[ok], minlength=num) == 0)
-        own, s0, s1 = own[ok], s[ok, :, :2], s[ok, :, 2:]
+        own, index = own[ok], index[ok]
+        h, ok = minimal_homographies(data.rows, data.offset[own], index, float(cfg.degeneracy_threshold))
+        own, h, index = own[ok], h[ok], index[ok]
+        side = _consistent_side(h, data.rows[data.offset[own, None] + index, :2])
+        ok = side != 0
+        own, h, side = own[ok], h[ok], side[ok]
         if len(own):
-            h, sigma2 = homography_dlt_batch(s0, s1)
-            side = _consistent_side(h, s0)
-            ok = (sigma2 >= cfg.degeneracy_threshold) & (side != 0)
-            own, h, side = own[ok], h[ok], side[ok]
-        if len(own):
-            counts = _count_homography_inliers(h, side, own, data, cfg.threshold, cfg.max_elements)
+            counts = inlier_counts(h, side, data.rows, data.offset[own], data.n[own], float(cfg.threshold))
             order = np.lexsort((np.arange(len(own)), -counts, own))  # per problem: best, then first drawn
             _, first = np.unique(own[order], return_index=True)
             top = order[first]
@@ -377,15 +313,10 @@ def _epipolar_counts(
     )
 
 
-def _homography_counts(
-    h: np.ndarray, side: np.ndarray, x0: np.ndarray, x1: np.ndarray, t: float, max_elements: int
-) -> np.ndarray:
-    """(M,) inlier counts of M homographies (two-sided error and plane side) on all correspondences."""
-    chunk = max(1, max_elements // max(len(x0), 1))
-    out = []
-    for s in range(0, len(h), chunk):
-        out.append(_homography_inlier_mask(h[s : s + chunk], side[s : s + chunk], x0.T, x1.T, t).sum(axis=1))
-    return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
+def _homography_counts(h: np.ndarray, side: np.ndarray, x0: np.ndarray, x1: np.ndarray, t: float) -> np.ndarray:
+    """(M,) inlier counts of M homographies (two-sided error and plane side) on all (K, 2) correspondences."""
+    start, n = np.zeros(len(h), dtype=np.int64), np.full(len(h), len(x0), dtype=np.int64)
+    return inlier_counts(np.ascontiguousarray(h), side, np.hstack([x0, x1]), start, n, float(t))
 
 
 def _refine_fundamental(
@@ -463,7 +394,7 @@ def ransac_fundamental(
             ok = (sigma_h >= cfg.degeneracy_threshold) & (side != 0)
             h, side = h[ok], side[ok]
             if len(h):
-                counts = _homography_counts(h, side, x0, x1, cfg.threshold, cfg.max_elements)
+                counts = _homography_counts(h, side, x0, x1, cfg.threshold)
                 b = _best_first(counts)
                 if counts[b] > best_h_count:
                     best_h, best_h_side, best_h_count = h[b], float(side[b]), int(counts[b])

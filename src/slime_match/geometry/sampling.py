@@ -1,8 +1,10 @@
-"""Vectorised random k-subset sampling for RANSAC (Floyd's algorithm run on all rows at once)."""
+"""Random k-subset sampling for RANSAC (Floyd's algorithm on all rows, a compiled loop)."""
 
 from __future__ import annotations
 
 import numpy as np
+
+from slime_match.geometry.ransac_kernels import floyd_subsets
 
 
 def sample_subsets_varying(rng: np.random.Generator, n: np.ndarray, k: int) -> np.ndarray:
@@ -22,14 +24,7 @@ def sample_subsets_varying(rng: np.random.Generator, n: np.ndarray, k: int) -> n
     n = np.asarray(n, dtype=np.int64)
     if k < 1 or np.any(n < k):
         raise ValueError(f"cannot draw {k} distinct indices from populations of size {n.min(initial=0)}")
-    out = np.empty((n.shape[0], k), dtype=np.int64)
-    for i in range(k):  # k <= 8: a loop over the subset size, not over samples
-        j = n - k + i
-        t = np.floor(rng.random(n.shape[0]) * (j + 1)).astype(np.int64)
-        t = np.minimum(t, j)
-        taken = (out[:, :i] == t[:, None]).any(axis=1)
-        out[:, i] = np.where(taken, j, t)
-    return out
+    return floyd_subsets(rng.random((k, n.shape[0])), n)  # row i of the uniforms: step i of every subset
 
 
 def sample_subsets(rng: np.random.Generator, n: int, k: int, count: int) -> np.ndarray:

@@ -25,6 +25,7 @@ import numpy as np
 import torch
 
 from ..features.laf import set_laf_angle
+from ..geometry import ransac_kernels
 from ..geometry.ransac import HomographyRansacConfig, ransac_homography_many
 from ..matching import blob, dtm
 from ..pipelines import BasePipeline
@@ -330,6 +331,7 @@ def match_pairs(pipeline: BasePipeline, pairs: list[tuple[int, int]], get0: Pair
     if workers > 1:  # the workers inherit the compiled loops instead of each loading them
         dtm.load_kernels()
         blob.load_kernels()
+        ransac_kernels.load_kernels()
     return fork_map(lambda k: _match_one(pipeline, pairs[k], get0, get1, blocks0, blocks1), len(pairs), workers,
                     8 * workers)
 
@@ -342,6 +344,8 @@ def ransac_batches(problems: list[tuple[np.ndarray, np.ndarray]], config: Homogr
     """``ransac_homography_many`` on consecutive batches of ``RANSAC_BATCH`` problems (batch b seeded with
     (seed, b)), spread over ``workers`` forked processes; the same results for any number of workers."""
     starts = range(0, len(problems), RANSAC_BATCH)
+    if workers > 1:  # the workers inherit the compiled loops instead of each loading them
+        ransac_kernels.load_kernels()
     parts = fork_map(lambda b: ransac_homography_many(problems[starts[b]:starts[b] + RANSAC_BATCH], config,
                                                       seed=[seed, b]), len(starts), workers, len(starts))
     return [result for part in parts for result in part]
