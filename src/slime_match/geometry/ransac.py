@@ -45,8 +45,6 @@ class HomographyRansacConfig:
             this are degenerate.
         batch: models drawn and scored together per problem and round.
         refine: refit the best model by least-squares DLT on its inliers (kept only if no inlier is lost).
-        max_elements: unused (the models are scored in a compiled loop, without large arrays); kept for
-            configuration compatibility.
     """
 
     threshold: float = 15.0
@@ -57,7 +55,6 @@ class HomographyRansacConfig:
     degeneracy_threshold: float = 0.05
     batch: int = 100
     refine: bool = True
-    max_elements: int = 2_000_000
 
 
 @dataclass
@@ -108,8 +105,10 @@ def make_config(cls: type[_C], config: _C | dict | None) -> _C:
         raise ConfigError("need 1 <= min_iterations <= max_iterations")
     if not 0 < config.confidence < 1:
         raise ConfigError(f"confidence must be in (0, 1), got {config.confidence}")
-    if config.batch < 1 or config.max_elements < 1:
-        raise ConfigError("batch and max_elements must be >= 1")
+    if config.batch < 1:
+        raise ConfigError(f"batch must be >= 1, got {config.batch}")
+    if isinstance(config, FundamentalRansacConfig) and config.max_elements < 1:
+        raise ConfigError(f"max_elements must be >= 1, got {config.max_elements}")
     return config
 
 
