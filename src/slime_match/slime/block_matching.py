@@ -331,7 +331,6 @@ def match_pairs(pipeline: BasePipeline, pairs: list[tuple[int, int]], get0: Pair
     if workers > 1:  # the workers inherit the compiled loops instead of each loading them
         dtm.load_kernels()
         blob.load_kernels()
-        ransac_kernels.load_kernels()
     return fork_map(lambda k: _match_one(pipeline, pairs[k], get0, get1, blocks0, blocks1), len(pairs), workers,
                     8 * workers)
 
