@@ -18,10 +18,12 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
 from slime_match.errors import ImageError
+from slime_match.features.patch_kernels import sample_patches
 
 
 def _inv_sqrt_spd(m: torch.Tensor) -> torch.Tensor:
@@ -159,8 +161,9 @@ class PatchPyramid:
 
     Level 0 is the image itself (assumed blur 0.5 px); level ``l >= 1`` is blurred to 1 px of its own and
     decimated by 2, so its pixel ``k`` sits at level-0 position ``2^l k``. A patch is sampled from the level
-    ``floor(log2(step))``, ``step`` being its sampling step in level-0 pixels, with one bilinear
-    ``grid_sample`` per level for all the patches of that level.
+    ``floor(log2(step))``, ``step`` being its sampling step in level-0 pixels, bilinearly with border
+    padding: on CPU by one compiled loop over all patches
+    (:func:`~slime_match.features.patch_kernels.sample_patches`), elsewhere by one ``grid_sample`` per level.
 
     Args:
         image: (C, H, W) or (H, W) float image in [0, 1], RGB or grey, on any device.
@@ -177,6 +180,21 @@ class PatchPyramid:
             x = _blur(self.levels[-1], math.sqrt(4.0 - sigma_prev**2))
             self.levels.append(x[:, :, ::2, ::2].contiguous())
             sigma_prev = 1.0
+        sizes = [lv.shape[-2:] for lv in self.levels]
+        # Level-0 pixels -> level pixels -> grid_sample's [-1, 1] (align_corners=True), per level and axis.
+        self._norm = torch.tensor(
+            [[2.0 / (max(w - 1, 1) * 2**k), 2.0 / (max(h - 1, 1) * 2**k)] for k, (h, w) in enumerate(sizes)],
+            device=self.device,
+        )
+        self._flat = None
+        if self.device.type == "cpu":  # the levels one after the other, for the compiled sampler
+            size = np.array([h * w for h, w in sizes], dtype=np.int64)
+            self._flat = (
+                torch.cat([lv.reshape(-1) for lv in self.levels]).numpy(),
+                np.cumsum(size) - size,
+                np.array([h for h, _ in sizes], dtype=np.int64),
+                np.array([w for _, w in sizes], dtype=np.int64),
+            )
 
     @property
     def device(self) -> torch.device:
@@ -197,25 +215,39 @@ class PatchPyramid:
         n, p = laf.shape[0], patch_size
         if n == 0:
             return torch.empty(0, 1, p, p, device=self.device)
-        lin = torch.linspace(-magnification, magnification, p, device=self.device)
-        gy, gx = torch.meshgrid(lin, lin, indexing="ij")
-        unit_t = torch.stack([gx.reshape(-1), gy.reshape(-1), torch.ones(p * p, device=self.device)])  # (3, P*P)
+        unit = torch.linspace(-magnification, magnification, p, device=self.device)
         step = 2.0 * magnification * laf_scale(laf) / max(p - 1, 1)
         level = torch.floor(torch.log2(step.clamp_min(1e-6))).clamp(0, len(self.levels) - 1).long()
+        # Unit patch coordinates (u, v, 1) -> the level's normalised coordinates: one affine map per patch.
+        affine = laf * self._norm[level][:, :, None]
+        affine[:, :, 2] -= 1.0
+        if self._flat is not None:
+            patches = sample_patches(*self._flat, affine.numpy(), level.numpy(), unit.numpy())
+            return torch.from_numpy(patches)[:, None]
+        return self._grid_sample(affine, level, unit)
+
+    def _grid_sample(self, affine: torch.Tensor, level: torch.Tensor, unit: torch.Tensor) -> torch.Tensor:
+        """:meth:`extract` by one ``grid_sample`` per level.
+
+        Args:
+            affine: (N, 2, 3) maps from unit patch coordinates to each level's normalised coordinates.
+            level: (N,) int64 pyramid levels.
+            unit: (P,) unit coordinates of the patch columns (and rows).
+
+        Returns:
+            (N, 1, P, P) patches.
+        """
+        p = unit.shape[0]
+        gy, gx = torch.meshgrid(unit, unit, indexing="ij")
+        unit_t = torch.stack([gx.reshape(-1), gy.reshape(-1), torch.ones(p * p, device=self.device)])  # (3, P*P)
         order = torch.argsort(level, stable=True)
         counts = torch.bincount(level, minlength=len(self.levels)).tolist()
         groups = []
-        for lv, sub in zip(range(len(self.levels)), laf[order].split(counts), strict=True):
+        for img, sub in zip(self.levels, affine[order].split(counts), strict=True):
             if sub.shape[0] == 0:
                 continue
-            img = self.levels[lv]
-            h, w = img.shape[-2:]
-            # Pixels -> level pixels -> grid_sample's [-1, 1] (align_corners=True), folded into one affine map.
-            norm = torch.tensor([2.0 / (max(w - 1, 1) * 2**lv), 2.0 / (max(h - 1, 1) * 2**lv)], device=self.device)
-            affine = sub * norm[None, :, None]
-            affine[:, :, 2] -= 1.0
             # One (2n, 3) @ (3, P*P) GEMM: ~5x faster than n batched (P*P, 3) @ (3, 2) products.
-            grid = (affine.reshape(-1, 3) @ unit_t).view(-1, 2, p * p).transpose(1, 2).reshape(1, -1, p, 2)
+            grid = (sub.reshape(-1, 3) @ unit_t).view(-1, 2, p * p).transpose(1, 2).reshape(1, -1, p, 2)
             patches = F.grid_sample(img, grid, mode="bilinear", padding_mode="border", align_corners=True)
             groups.append(patches.reshape(sub.shape[0], 1, p, p))
         return torch.cat(groups)[torch.argsort(order)]

@@ -16,9 +16,12 @@ from slime_match.errors import ConfigError
 from slime_match.features.gradients import patch_gradients
 from slime_match.features.inference import fuse_for_inference
 from slime_match.features.laf import PatchPyramid, laf_scale, upright_laf
+from slime_match.features.patch_kernels import second_moments
 from slime_match.features.weights import load_model
 
 SHAPE_METHODS = ("affnet", "baumberg")
+# Frames per Baumberg step: no network, so large steps amortise the per-call overhead (16 MiB of patches).
+_BAUMBERG_CHUNK = 4096
 
 
 @dataclass
@@ -61,6 +64,31 @@ def _compose_keep_scale(up: torch.Tensor, shape: torch.Tensor, max_anisotropy: f
     return torch.where(ok[:, None, None], out, up)
 
 
+def _second_moments(patches: torch.Tensor, window_sigma: float) -> torch.Tensor:
+    """(N, 3) float64 Gaussian-weighted sums of ``gx^2``, ``gx gy``, ``gy^2`` (Sobel) of patches (N, 1, P, P).
+
+    A compiled per-patch loop on CPU (:func:`~slime_match.features.patch_kernels.second_moments`), whole-batch
+    torch operations elsewhere.
+    """
+    p = patches.shape[-1]
+    t = torch.arange(p, dtype=patches.dtype, device=patches.device) - (p - 1) / 2
+    w1 = torch.exp(-0.5 * (t / window_sigma) ** 2)
+    w = w1[:, None] * w1[None, :]  # (P, P)
+    if patches.device.type == "cpu":
+        return torch.from_numpy(second_moments(patches[:, 0].numpy(), w.numpy()))
+    return _torch_second_moments(patches, w)
+
+
+def _torch_second_moments(patches: torch.Tensor, window: torch.Tensor) -> torch.Tensor:
+    """:func:`_second_moments` by whole-batch torch operations, for the Gaussian ``window`` (P, P)."""
+    n, _, p, _ = patches.shape
+    gx, gy = patch_gradients(patches, "sobel")  # (N, P, P) each
+    w = window.reshape(p * p)
+    gx, gy = gx.reshape(n, p * p), gy.reshape(n, p * p)
+    wgx = gx * w
+    return torch.stack([(wgx * gx).sum(1), (wgx * gy).sum(1), (gy * gy * w).sum(1)], 1).double()
+
+
 def second_moment_shape(patches: torch.Tensor, window_sigma: float) -> torch.Tensor:
     """Baumberg step: the normalising transform ``M^{-1/2}`` of the patches' gradient second-moment matrix.
 
@@ -71,15 +99,7 @@ def second_moment_shape(patches: torch.Tensor, window_sigma: float) -> torch.Ten
     Returns:
         (N, 2, 2) shapes ``M^{-1/2}`` with det 1 (identity for flat patches).
     """
-    n, _, p, _ = patches.shape
-    gx, gy = patch_gradients(patches, "sobel")  # (N, P, P) each
-    t = torch.arange(p, dtype=patches.dtype, device=patches.device) - (p - 1) / 2
-    w1 = torch.exp(-0.5 * (t / window_sigma) ** 2)
-    w = (w1[:, None] * w1[None, :]).reshape(p * p)
-    gx, gy = gx.reshape(n, p * p), gy.reshape(n, p * p)
-    wgx = gx * w
-    xx, xy, yy = (wgx * gx).sum(1), (wgx * gy).sum(1), (gy * gy * w).sum(1)
-    a, b, c = xx.double(), xy.double(), yy.double()  # M = [[a, b], [b, c]]
+    a, b, c = _second_moments(patches, window_sigma).unbind(1)  # M = [[a, b], [b, c]]
     det = a * c - b * b
     tr = a + c
     flat = ~(det > 1e-12 * tr.square()) | ~(tr > 1e-12)
@@ -137,7 +157,7 @@ class ShapeEstimator:
         cfg = self.config
         up = upright_laf(laf.to(pyramid.device, torch.float32))
         chunks = []
-        for part in up.split(cfg.batch_size):
+        for part in up.split(cfg.batch_size if self.method == "affnet" else _BAUMBERG_CHUNK):
             if self.method == "affnet":
                 patches = pyramid.extract(part, cfg.patch_size, cfg.magnification)
                 part = _compose_keep_scale(part, self._affnet_shape(patches), cfg.max_anisotropy)
