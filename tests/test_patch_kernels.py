@@ -1,6 +1,8 @@
 """Compiled per-patch loops (CPU) against reference formulas and against the torch path (which CUDA runs)."""
 
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -148,3 +150,27 @@ def test_sampler_survives_non_finite_frames():
     pyr = PatchPyramid(torch.rand(3, 40, 50))
     laf = torch.tensor([[[1.0, 0.0, float("nan")], [0.0, 1.0, 10.0]], [[1e30, 0.0, 1e30], [0.0, 1.0, -1e30]]])
     assert pyr.extract(laf, 8, 1.0).shape == (2, 1, 8, 8)
+
+
+_WARM_CHECK = """
+import numpy as np
+from numba.core.registry import CPUDispatcher
+from slime_match.features import extractor, patch_kernels
+from slime_match.pipelines import BaseConfig, make_base_pipeline
+kernels = {n: k for n, k in vars(patch_kernels).items() if isinstance(k, CPUDispatcher)}
+extractor.load_kernels()
+loaded = {n: len(k.signatures) for n, k in kernels.items()}
+pipeline = make_base_pipeline(BaseConfig(shape="baumberg", orientation="gradient", descriptor="rootsift"))
+image = np.random.default_rng(0).uniform(0, 1, (96, 128, 3)).astype(np.float32)
+context = pipeline.prepare(image)
+pipeline.describe_fixed(context, pipeline.detect(context), 0.5)
+print(loaded == {n: len(k.signatures) for n, k in kernels.items()}, sum(loaded.values()))
+"""
+
+
+def test_load_kernels_loads_what_weight_free_extraction_calls():
+    """After ``extractor.load_kernels`` a real weight-free extraction compiles nothing more (forked workers
+    inherit every kernel)."""
+    out = subprocess.run([sys.executable, "-c", _WARM_CHECK], capture_output=True, text=True, check=True)
+    same, loaded = out.stdout.split()
+    assert same == "True" and int(loaded) >= 4  # sampling, moments, orientation, SIFT

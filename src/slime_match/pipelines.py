@@ -26,9 +26,11 @@ import torch
 
 from .errors import ConfigError
 from .features.extractor import LocalFeatureExtractor, PatchConfig
+from .features.extractor import load_kernels as load_patch_kernels
 from .features.harrisz import HarrisZConfig, detect_harrisz
 from .features.laf import PatchPyramid, set_laf_angle
 from .io import to_tensor
+from .matching import blob, dtm
 from .matching.blob import BlobConfig, blob_match
 from .matching.dtm import DTMConfig, dtm_filter
 from .matching.nn import match_fginn
@@ -114,6 +116,10 @@ class BasePipeline:
         """Features of an (H, W, 3) float image."""
         return self.detect(self.prepare(image))
 
+    def load_kernels(self) -> None:
+        """Load the compiled loops that this pipeline's calls run on CPU, in this process (none by default).
+        Call it before forking workers that run the pipeline, or each of them loads them again."""
+
     def describe(self) -> dict[str, Any]:
         """Parameters actually used (for the output summary)."""
         return {}
@@ -174,6 +180,12 @@ class HzPlusPipeline(BasePipeline):
                           unmatched0=_unmatched(xy0, candidates.idx0), unmatched1=_unmatched(xy1, candidates.idx1),
                           config=self.config.dtm).keep
         return candidates.subset(keep)
+
+    def load_kernels(self) -> None:
+        if self.device.type == "cpu":
+            load_patch_kernels()
+        blob.load_kernels()
+        dtm.load_kernels()
 
     def describe(self) -> dict[str, Any]:
         return {"base": "hz+", "detector": "harrisz+", **dataclasses.asdict(self.harrisz),
@@ -259,6 +271,9 @@ class RootSiftPipeline(BasePipeline):
         matches = match_fginn(features0.descriptors, features1.descriptors, features0.xy, features1.xy,
                               ratio=self.config.fginn_ratio, spatial_radius=self.config.fginn_radius)
         return _filtered(matches, features0, features1, candidate_filter)
+
+    def load_kernels(self) -> None:
+        blob.load_kernels()  # FGINN runs the nearest-neighbour loops of Blob matching
 
     def describe(self) -> dict[str, Any]:
         return {"base": "rootsift", "detector": "opencv-dog", "descriptor": "rootsift", "matcher": "fginn",

@@ -24,15 +24,17 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 
 import torch
 
 from slime_match.errors import ConfigError
 from slime_match.features.descriptors import Descriptor, DescriptorConfig
+from slime_match.features.gradients import DominantGradientOrientation, SIFTPatchDescriptor
 from slime_match.features.laf import PatchPyramid, ellipse_to_laf, set_laf_angle
 from slime_match.features.orientation import OrientationConfig, Orienter
-from slime_match.features.shape import ShapeConfig, ShapeEstimator
+from slime_match.features.shape import ShapeConfig, ShapeEstimator, second_moment_shape
 from slime_match.options import config_from_dict
 from slime_match.types import Features, Keypoints
 
@@ -140,3 +142,18 @@ class LocalFeatureExtractor:
         if response is None:
             response = torch.zeros(laf.shape[0], device=laf.device)
         return Features(laf=laf, descriptors=desc, response=response.to(laf.device), shape_laf=shape_laf)
+
+
+@cache
+def load_kernels() -> None:
+    """Load the compiled patch loops (``patch_kernels``: sampling, Baumberg moments, orientation and SIFT
+    histograms) in this process, once, by running each on a few CPU patches (from numba's on-disk cache, or
+    compiled on first use: a few seconds). Call it before forking workers that extract features on CPU, or
+    each of them pays it."""
+    g = torch.Generator().manual_seed(0)
+    pyramid = PatchPyramid(torch.rand(1, 48, 48, generator=g))
+    laf = torch.tensor([[[4.0, 0.0, 24.0], [0.0, 4.0, 24.0]]]).repeat(3, 1, 1)
+    patches = pyramid.extract(laf, 32, 1.0)
+    second_moment_shape(patches, 10.0)
+    DominantGradientOrientation(32)(patches)
+    SIFTPatchDescriptor(32)(patches)

@@ -25,9 +25,7 @@ import numpy as np
 import torch
 
 from ..features.laf import set_laf_angle
-from ..geometry import ransac_kernels
 from ..geometry.ransac import HomographyRansacConfig, ransac_homography_many
-from ..matching import blob, dtm
 from ..pipelines import BasePipeline
 from ..types import Features, Matches
 from .blocks import Block, points_in_blocks, resize_lanczos
@@ -328,9 +326,6 @@ def match_pairs(pipeline: BasePipeline, pairs: list[tuple[int, int]], get0: Pair
                 blocks0: list[Block], blocks1: list[Block], workers: int = 1) -> list[Matches]:
     """The base pipeline on many block pairs, in ``workers`` forked processes (see ``fork_map``) when > 1."""
     workers = workers if len(pairs) >= 4 * workers else 1
-    if workers > 1:  # the workers inherit the compiled loops instead of each loading them
-        dtm.load_kernels()
-        blob.load_kernels()
     return fork_map(lambda k: _match_one(pipeline, pairs[k], get0, get1, blocks0, blocks1), len(pairs), workers,
                     8 * workers)
 
@@ -343,8 +338,6 @@ def ransac_batches(problems: list[tuple[np.ndarray, np.ndarray]], config: Homogr
     """``ransac_homography_many`` on consecutive batches of ``RANSAC_BATCH`` problems (batch b seeded with
     (seed, b)), spread over ``workers`` forked processes; the same results for any number of workers."""
     starts = range(0, len(problems), RANSAC_BATCH)
-    if workers > 1:  # the workers inherit the compiled loops instead of each loading them
-        ransac_kernels.load_kernels()
     parts = fork_map(lambda b: ransac_homography_many(problems[starts[b]:starts[b] + RANSAC_BATCH], config,
                                                       seed=[seed, b]), len(starts), workers, len(starts))
     return [result for part in parts for result in part]

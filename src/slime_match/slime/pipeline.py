@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..geometry import ransac_kernels
 from ..geometry.homography import project
 from ..geometry.ransac import HomographyRansacConfig
 from ..pipelines import BasePipeline
@@ -217,6 +218,9 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     if layout:
         warn(layout)
     workers = _workers(config.workers, pipeline)
+    if workers > 1:  # loaded once here, the forked workers of every stage inherit the compiled loops
+        pipeline.load_kernels()
+        ransac_kernels.load_kernels()
     with timer("features"):  # the tiles' regions too (Sec. 3.8), so that all detections share the workers
         requests = [LevelRequest(image0, blocks0, shared=config.shared_detection),
                     LevelRequest(image1, blocks1, shared=config.shared_detection)]
