@@ -12,6 +12,7 @@ from scipy.spatial import Delaunay, cKDTree
 
 from slime_match.errors import ConfigError
 from slime_match.eval.metrics import correct_matches_homography
+from slime_match.matching import delaunay as delaunay_module
 from slime_match.matching import dtm as dtm_module
 from slime_match.matching import dtm_kernels
 from slime_match.matching.blob import blob_match
@@ -229,7 +230,9 @@ def test_near_pairs_and_classify_match_brute_force():
                 if near[point_of[x], point_of[y]]}
     assert got == expected
     p, q = g.integers(0, n, (2, 3000))
-    kind = np.array([dtm_kernels.relation(i, j, tri.first, tri.degree, tri.adjacent) for i, j in zip(p, q)])
+    p[::2] = p[1::2]  # runs of one p (marks reused) and changes of p (marks redone, stale ones left)
+    mark = np.full(big + 1, -1, np.int64)
+    kind = np.array([dtm_kernels.relation(i, j, tri.first, tri.degree, tri.adjacent, mark) for i, j in zip(p, q)])
     is_near, is_far = kind == dtm_kernels.NEAR, kind == dtm_kernels.FAR
     np.testing.assert_array_equal(is_near, near[p, q])
     np.testing.assert_array_equal(is_far, ~within_two[p, q])
@@ -329,3 +332,60 @@ def test_local_affine_fits():
     affine, offset = dtm_kernels.local_affine(src[:1], np.zeros((0, 2), np.int64), dst[:1], 1.0)
     np.testing.assert_allclose(affine, 0.0)
     np.testing.assert_allclose(offset, dst[:1])
+
+
+def test_nearest_point_flags_exact_ties():
+    """Brute-force nearest kept point (the first n), with exact ties flagged; untied answers are cKDTree's."""
+    pts = np.array([[0.0, 0], [2, 0], [5, 5], [9, 9]])  # the last one is not kept
+    q = np.array([[1.0, 0], [0, 1], [8, 8], [4, 5]])
+    nearest, tied = dtm_kernels.nearest_point(pts, 3, q)
+    np.testing.assert_array_equal(tied, [True, False, False, False])
+    np.testing.assert_array_equal(nearest[1:], [0, 2, 2])
+    g = np.random.default_rng(7)
+    pts = np.unique(np.rint(g.uniform(0, 50, (200, 2))), axis=0)
+    q = np.rint(g.uniform(0, 50, (500, 2)))
+    nearest, tied = dtm_kernels.nearest_point(pts, len(pts), q)
+    d2 = ((q[:, None] - pts[None]) ** 2).sum(2)
+    np.testing.assert_array_equal(tied, (d2 == d2.min(1, keepdims=True)).sum(1) > 1)
+    np.testing.assert_array_equal(d2[np.arange(len(q)), nearest], d2.min(1))
+    np.testing.assert_array_equal(nearest[~tied], cKDTree(pts).query(q[~tied])[1])
+
+
+def test_grid_vertices_and_unique_inverse_match_numpy():
+    g = np.random.default_rng(8)
+    xy = np.r_[g.uniform(-5, 45, (300, 2)), [[2.5, 3.5], [1.5, 0.5], [np.inf, -np.inf]]]
+    xy[:50] = np.rint(xy[:50]) + 0.5  # rounding ties go to even
+    h, w = 30, 40
+    r = np.clip(np.rint(xy), [0, 0], [w - 1, h - 1])
+    keys, inverse = np.unique(r[:, 1] * (w + 2) + r[:, 0], return_inverse=True)
+    got, got_inverse = dtm_kernels.grid_vertices(xy, w, h)
+    np.testing.assert_array_equal(got, np.c_[keys % (w + 2), keys // (w + 2)])
+    np.testing.assert_array_equal(got_inverse, inverse)
+    ints = g.integers(-3, 9, 100)
+    for got, want in zip(dtm_kernels.unique_inverse(ints), np.unique(ints, return_inverse=True)):
+        np.testing.assert_array_equal(got, want)
+
+
+def test_carved_mesh_keeps_the_free_points_touching_the_ring():
+    """The free points kept are those sharing a triangle with a ring point in the triangulation of
+    everything; the mesh is the triangulation of the points plus them, with its tables."""
+    g = np.random.default_rng(9)
+    side = np.r_[np.arange(-1, 60, 10), 60]
+    ring = np.array([[x, y] for x in side for y in (-1, 60)] + [[x, y] for x in (-1, 60) for y in side[1:-1]], float)
+    inner = np.unique(np.rint(g.uniform(0, 59, (90, 2))), axis=0)
+    kept, free = inner[:40], inner[40:]
+    points = np.r_[kept, ring]
+    everything = np.r_[points, free]
+    simplices = delaunay_module.delaunay(everything)[0]
+    touching = simplices[(np.isin(simplices, np.arange(40, len(points)))).any(1)]
+    carved = np.unique(touching[touching >= len(points)]) - len(points)
+    assert 0 < len(carved) < len(free)
+    got = dtm_kernels.carved_mesh(points, 40, free)
+    np.testing.assert_array_equal(got[0], np.r_[points, free[carved]])
+    simplices, neighbors = delaunay_module.delaunay(got[0])
+    np.testing.assert_array_equal(got[1], simplices)
+    np.testing.assert_array_equal(got[2], neighbors)
+    for a, b in zip(got[3:7], dtm_kernels.mesh_tables(simplices, len(got[0]), 40)):
+        np.testing.assert_array_equal(a, b)
+    assert got[7] == 0
+    assert dtm_kernels.carved_mesh(np.delete(points, 40, 0), 40, free)[7] == 1  # corner (-1, -1) missing

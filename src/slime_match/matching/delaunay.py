@@ -216,8 +216,13 @@ def delaunay(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         corner (-1 on the hull).
     """
     simplices, neighbors, error = triangulate(np.ascontiguousarray(points, np.int64))
+    check(error)
+    return simplices, neighbors
+
+
+def check(error: int) -> None:
+    """Raise the ValueError that a ``triangulate`` error code stands for (0: none)."""
     if error:
         raise ValueError({1: "Delaunay: the four corners of the points' bounding rectangle must be among them",
                           2: "Delaunay: points must be unique",
                           3: f"Delaunay: points span more than {MAX_SIDE} px (exact int64 predicates)"}[error])
-    return simplices, neighbors

@@ -52,20 +52,23 @@ from scipy.spatial import cKDTree
 
 from ..errors import ConfigError
 from ..options import config_from_dict
-from .delaunay import MAX_SIDE, delaunay
+from .delaunay import MAX_SIDE, check
 from .dtm_kernels import (
+    carved_mesh,
     contraction_step,
+    grid_vertices,
     local_affine,
     locate,
-    mesh_tables,
-    ring_carved,
+    nearest_point,
     transfer_test,
+    unique_inverse,
     walk_tables,
 )
 
 log = logging.getLogger("slime_match")
 _PARALLEL_MIN = 6000  # points (candidates + unmatched) from which both meshes are built in two threads
 _RIDGE = 1.0  # px^2, local affine fits: negligible against real neighbourhoods, decisive for degenerate ones
+_NO_POINTS = np.empty((0, 2))
 
 
 @dataclass
@@ -139,12 +142,15 @@ class _Triangulation:
     edges: np.ndarray
 
     @classmethod
-    def of(cls, points: np.ndarray, kept: int | None = None) -> _Triangulation:
+    def of(cls, points: np.ndarray, kept: int | None = None, free: np.ndarray | None = None) -> _Triangulation:
         """Triangulate unique integer-valued (P, 2) points that include the four corners of their bounding
-        rectangle (``delaunay``); the first ``kept`` (default all) are kept points."""
-        simplices, neighbors = delaunay(points)
-        return cls(points, simplices, neighbors,
-                   *mesh_tables(simplices, len(points), len(points) if kept is None else kept))
+        rectangle, the first ``kept`` (default all) being kept points, plus those of the free points (F, 2)
+        that carve the hull (``dtm_kernels.carved_mesh``)."""
+        points = np.ascontiguousarray(points, np.float64)
+        *mesh, error = carved_mesh(points, len(points) if kept is None else kept,
+                                   _NO_POINTS if free is None else free)
+        check(error)
+        return cls(*mesh)
 
     @cached_property
     def walk(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -184,7 +190,7 @@ class _Mesh:
 
     @cached_property
     def tree(self) -> cKDTree:
-        """k-d tree of the kept vertices."""
+        """k-d tree of the kept vertices (resolves ties in ``_transfer_ok``)."""
         return cKDTree(self.tri.points[: len(self.vertex)])
 
 
@@ -216,15 +222,10 @@ def _triangulate(vertex: np.ndarray, vertex_xy: np.ndarray, size: tuple[int, int
         unmatched: (U >= 1, 2) unique rounded unmatched keypoints of this image off all candidate vertices,
             or None.
     """
-    pts = vertex_xy[vertex]
-    n = len(pts)
+    n = len(vertex)
     h, w = size
     border = _border_ring(size, max(round(float(cfg.border_spacing * math.sqrt(w * h / max(n, 1)))), 1))
-    if unmatched is not None:
-        first_free = n + len(border)
-        simplices = delaunay(np.concatenate([pts, border, unmatched]))[0]
-        border = np.concatenate([border, unmatched[ring_carved(simplices, n, first_free, len(unmatched))]])
-    tri = _Triangulation.of(np.concatenate([pts, border]), n)
+    tri = _Triangulation.of(np.concatenate([vertex_xy[vertex], border]), n, unmatched)
     local = np.full(len(vertex_xy), -1, np.int64)
     local[vertex] = np.arange(n)
     return _Mesh(tri, vertex, local)
@@ -244,36 +245,33 @@ def _transfer_ok(mesh: _Mesh, dst_v: np.ndarray, q_src: np.ndarray, q_dst: np.nd
         (P,) bool.
     """
     tri, n = mesh.tri, len(mesh.vertex)
-    nearest = mesh.tree.query(q_src)[1]
-    simplex = tri.locate(q_src, nearest)
-    if (tri.simplices[simplex[simplex >= 0]] >= n).any():
-        affine, offset = mesh.local_affine(dst_v)
-    else:  # no border corner: the maps are not read
-        affine, offset = np.empty((0, 2, 2)), np.empty((0, 2))
-    return transfer_test(tri.points, tri.simplices, tri.walk[3], n, simplex, nearest, dst_v, affine, offset,
-                         np.ascontiguousarray(q_dst, np.float64), tol)
+    nearest, tied = nearest_point(tri.points, n, q_src)
+    if tied.any():  # cKDTree's pick among equidistant vertices: it seeds the walk and maps border corners
+        nearest[tied] = mesh.tree.query(q_src[tied])[1]
+    affine, offset = mesh.local_affine(dst_v)
+    return transfer_test(tri.points, tri.simplices, tri.walk[3], n, tri.locate(q_src, nearest), nearest, dst_v,
+                         affine, offset, np.ascontiguousarray(q_dst, np.float64), tol)
 
 
 def _vertices(xy: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Rounded, clipped positions merged into vertices: (V, 2) float positions, (K,) vertex of each point."""
-    h, w = size
-    r = np.clip(np.rint(xy), [0, 0], [w - 1, h - 1])
-    uniq, inverse = np.unique(_row_keys(r, size), return_inverse=True)
-    return np.stack([uniq % (w + 2), uniq // (w + 2)], 1).astype(np.float64), inverse.reshape(-1)
+    """Rounded, clipped positions merged into vertices: (V, 2) float positions (by row, then column), (K,)
+    vertex of each point."""
+    return grid_vertices(np.ascontiguousarray(xy, np.float64), size[1], size[0])
 
 
 def _row_keys(xy: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """int64 key of integer positions inside the image."""
+    """int64 key of integer positions inside the image (ascending with ``_vertices``' order)."""
     return xy[:, 1].astype(np.int64) * (size[1] + 2) + xy[:, 0].astype(np.int64)
 
 
 def _prepare_unmatched(xy: np.ndarray | None, size: tuple[int, int],
                        vertex_xy: np.ndarray) -> np.ndarray | None:
-    """(U, 2) unique rounded unmatched keypoints off the candidates' vertices (V, 2), or None if none."""
+    """(U, 2) unique rounded unmatched keypoints off the candidates' vertices (V >= 1, 2), or None if none."""
     if xy is None or len(xy) == 0:
         return None
     free = _vertices(np.asarray(xy, np.float64).reshape(-1, 2), size)[0]
-    free = free[~np.isin(_row_keys(free, size), _row_keys(vertex_xy, size), assume_unique=True)]
+    keys, taken = _row_keys(free, size), _row_keys(vertex_xy, size)
+    free = free[taken[np.minimum(np.searchsorted(taken, keys), len(taken) - 1)] != keys]
     return free if len(free) else None
 
 
@@ -328,8 +326,7 @@ def _filter(xy0, xy1, scores, size0, size1, unmatched0, unmatched1, config) -> D
         return DTMResult(np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0, bool))
 
     (vxy0, v0), (vxy1, v1) = _vertices(xy0, sizes[0]), _vertices(xy1, sizes[1])
-    unit_keys, unit_of = np.unique(v0 * len(vxy1) + v1, return_inverse=True)
-    unit_of = unit_of.reshape(-1)
+    unit_keys, unit_of = unique_inverse(v0 * len(vxy1) + v1)
     uscore = np.full(len(unit_keys), np.inf)
     np.minimum.at(uscore, unit_of, scores)
     unmatched = (_prepare_unmatched(unmatched0, sizes[0], vxy0),
@@ -356,7 +353,7 @@ class _Units:
         uv: per image, (U,) vertex id of each unit; score: (U,) best score of the unit's matches;
         vxy: per image, (V, 2) vertex positions; sizes: per image (H, W); unmatched: per image (N, 2)
         rounded unmatched keypoints or None; alive: (U,) currently kept units; by_vertex: per image, (U,)
-        the units sorted by vertex, then score.
+        the units sorted by vertex, then score; by_score: (U,) the units by score, then id.
     """
 
     def __init__(self, uv: tuple[np.ndarray, np.ndarray], score: np.ndarray,
@@ -368,6 +365,7 @@ class _Units:
         self.unmatched, self.cfg, self.pool = unmatched, cfg, pool
         self.alive = np.ones(len(score), bool)
         self.by_vertex = tuple(np.lexsort((score, v)) for v in uv)
+        self.by_score = np.argsort(score, kind="stable")
         self._cache: list[tuple[bytes, _Mesh] | None] = [None, None]
 
     def mesh(self, s: int) -> _Mesh:
@@ -401,7 +399,7 @@ class _Units:
         iteration = 0
         while iteration < self.cfg.max_iterations and self.alive.any():
             m0, m1 = self.meshes()
-            removed = contraction_step(self.alive, self.score, m0.local[self.uv[0]], m1.local[self.uv[1]],
+            removed = contraction_step(self.alive, self.by_score, m0.local[self.uv[0]], m1.local[self.uv[1]],
                                        *self.by_vertex, m0.tri.edges, m1.tri.edges, len(m0.vertex),
                                        len(m1.vertex), m0.tri.first, m0.tri.degree, m0.tri.adjacent,
                                        m1.tri.first, m1.tri.degree, m1.tri.adjacent)
@@ -444,7 +442,10 @@ class _Units:
             o = 1 - s
             grouped = self.grouped(s)
             v = self.uv[s][grouped]
-            rep = grouped[np.append(True, v[1:] != v[:-1])]  # best-scored alive unit on each kept vertex
+            first = np.empty(len(v), bool)  # best-scored alive unit on each kept vertex
+            first[0] = True
+            np.not_equal(v[1:], v[:-1], out=first[1:])
+            rep = grouped[first]
             unit = cand[ok]
             ok = ok[_transfer_ok(self.mesh(s), self.vxy[o][self.uv[o][rep]], self.vxy[s][self.uv[s][unit]],
                                  self.vxy[o][self.uv[o][unit]], self.cfg.inside_tolerance)]

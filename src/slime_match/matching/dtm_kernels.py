@@ -1,5 +1,5 @@
-"""Compiled loops of DTM (numba): mesh neighbour tables, one contraction step, point location and the
-transfer test of expansion.
+"""Compiled loops of DTM (numba): vertex merging, mesh construction and neighbour tables, one contraction step, nearest
+vertices, point location and the transfer test of expansion.
 
 DTM runs on meshes of a few hundred vertices, thousands of times per Slime run. In numpy each of its steps is
 dozens of calls on tiny arrays, and the call overhead dominates; here each step is one pass. Positions are
@@ -16,9 +16,69 @@ import math
 import numpy as np
 from numba import njit
 
+from .delaunay import triangulate
+
 _compiled = njit(cache=True, nogil=True)
 
 NEAR, APART, FAR = 0, 1, 2  # relations of two kept mesh points, see ``relation``
+
+
+@_compiled
+def unique_inverse(keys):
+    """``np.unique(keys, return_inverse=True)`` of int64 keys (K,): the distinct keys ascending (V,) and the
+    index of each key among them (K,)."""
+    order = np.argsort(keys)
+    distinct = np.empty(len(keys), np.int64)
+    inverse = np.empty(len(keys), np.int64)
+    m = -1
+    for i in order:
+        if m < 0 or keys[i] != distinct[m]:
+            m += 1
+            distinct[m] = keys[i]
+        inverse[i] = m
+    return distinct[:m + 1], inverse
+
+
+@_compiled
+def grid_vertices(xy, w, h):
+    """Positions xy (K, 2) rounded (half to even), clipped to the w x h pixel grid and merged: (V, 2) float64
+    the distinct ones by row then column, (K,) the one of each position."""
+    key = np.empty(len(xy), np.int64)
+    for i in range(len(xy)):
+        x = min(max(np.rint(xy[i, 0]), 0.0), w - 1.0)
+        y = min(max(np.rint(xy[i, 1]), 0.0), h - 1.0)
+        key[i] = int(y) * (w + 2) + int(x)
+    distinct, inverse = unique_inverse(key)
+    out = np.empty((len(distinct), 2))
+    for v in range(len(distinct)):
+        out[v, 0], out[v, 1] = distinct[v] % (w + 2), distinct[v] // (w + 2)
+    return out, inverse
+
+
+@_compiled
+def carved_mesh(points, n, free):
+    """A mesh in one pass: the Delaunay triangulation (``delaunay.triangulate``) of points and of the free
+    points that share a triangle with a border point in the triangulation of everything (they carve the
+    hull), with its neighbour tables (``mesh_tables``).
+
+    Args:
+        points: (P, 2) float64 unique integer-valued positions, the first n kept vertices, the others border
+            points that include the four corners of the bounding rectangle.
+        free: (F, 2) float64 unique integer-valued positions inside that rectangle, off points (F may be 0).
+
+    Returns:
+        points: (P + C, 2) the input points, then the C carving free points in their order.
+        simplices, neighbors: (T, 3) the triangulation (``delaunay.triangulate``).
+        first, degree, adjacent, edges: its tables (``mesh_tables``).
+        error: ``delaunay.triangulate``'s error code, 0 when both triangulations succeed.
+    """
+    error = 0
+    if len(free):
+        simplices, _, error = triangulate(np.concatenate((points, free)).astype(np.int64))
+        points = np.concatenate((points, free[ring_carved(simplices, n, len(points), len(free))]))
+    simplices, neighbors, final_error = triangulate(points.astype(np.int64))
+    first, degree, adjacent, edges = mesh_tables(simplices, len(points), n)
+    return points, simplices, neighbors, first, degree, adjacent, edges, error or final_error
 
 
 @_compiled
@@ -107,6 +167,24 @@ def walk_tables(points, simplices, neighbors):
             start[simplices[t, k]] = t
         proper[t] = twice_area > 0
     return lines, across, start, proper
+
+
+@_compiled
+def nearest_point(points, n, q):
+    """The point among the first n of points (P, 2) nearest each query q (Q, 2): (Q,) its index and (Q,)
+    whether another of them is exactly as near (exact on integer-valued positions)."""
+    nearest = np.empty(len(q), np.int64)
+    tied = np.zeros(len(q), np.bool_)
+    for i in range(len(q)):
+        best = np.inf
+        for v in range(n):
+            dx, dy = points[v, 0] - q[i, 0], points[v, 1] - q[i, 1]
+            d = dx * dx + dy * dy
+            if d < best:
+                best, nearest[i], tied[i] = d, v, False
+            elif d == best:
+                tied[i] = True
+    return nearest, tied
 
 
 @_compiled
@@ -270,21 +348,24 @@ def local_affine(src, edges, dst, ridge):
 
 
 @_compiled
-def relation(p, q, first, degree, adjacent):
+def relation(p, q, first, degree, adjacent, mark):
     """NEAR: kept mesh points p and q are one point or Delaunay neighbours; FAR: they are more than two
-    Delaunay edges apart (paths through border points included); APART otherwise."""
+    Delaunay edges apart (paths through border points included); APART otherwise.
+
+    mark: (P + 1,) int64 scratch, -1 before the first call and then shared by the calls on one mesh, cheapest
+    when consecutive calls share p: mark[k] == p for the neighbours k of the last p, which mark[P] holds.
+    """
     if p == q:
         return NEAR
-    if degree[p] > degree[q]:
-        p, q = q, p
-    for j in range(first[p], first[p] + degree[p]):
-        if adjacent[j] == q:
-            return NEAR
-    for j in range(first[p], first[p] + degree[p]):
-        k = adjacent[j]
-        for m in range(first[k], first[k] + degree[k]):
-            if adjacent[m] == q:
-                return APART
+    if mark[-1] != p:
+        for j in range(first[p], first[p] + degree[p]):
+            mark[adjacent[j]] = p
+        mark[-1] = p
+    if mark[q] == p:
+        return NEAR
+    for j in range(first[q], first[q] + degree[q]):  # a common neighbour (q is off the hull: its list is whole)
+        if mark[adjacent[j]] == p:
+            return APART
     return FAR
 
 
@@ -363,13 +444,14 @@ def _classified_pairs(by_vertex, alive, point, n, edges, other, first, degree, a
         start[point[u] + 1] += 1
     a, b = near_unit_pairs(members, np.cumsum(start), edges)
     kind = np.empty(len(a), np.int64)
+    mark = np.full(len(first) + 1, -1, np.int64)
     for j in range(len(a)):
-        kind[j] = relation(other[a[j]], other[b[j]], first, degree, adjacent)
+        kind[j] = relation(other[a[j]], other[b[j]], first, degree, adjacent, mark)
     return a, b, kind
 
 
 @_compiled
-def contraction_step(alive, score, point0, point1, by_vertex0, by_vertex1, edges0, edges1, n0, n1,
+def contraction_step(alive, by_score, point0, point1, by_vertex0, by_vertex1, edges0, edges1, n0, n1,
                      first0, degree0, adjacent0, first1, degree1, adjacent1):
     """The units one contraction iteration removes: (U,) bool.
 
@@ -380,7 +462,7 @@ def contraction_step(alive, score, point0, point1, by_vertex0, by_vertex1, edges
     consistent neighbour.
 
     Args:
-        alive: (U,) bool; score: (U,) best score of each unit's matches, lower is better.
+        alive: (U,) bool; by_score: (U,) the units by best score of their matches (lower is better), then id.
         point0, point1: (U,) mesh point of each unit in each image (read for alive units).
         by_vertex0, by_vertex1: (U,) the units sorted by vertex in each image, then score.
         edges*, n*, first*, degree*, adjacent*: each image's mesh (see ``mesh_tables``).
@@ -392,9 +474,17 @@ def contraction_step(alive, score, point0, point1, by_vertex0, by_vertex1, edges
         if kind0[j] == NEAR:
             n_consistent[a0[j]] += 1
             n_consistent[b0[j]] += 1
-    units = np.nonzero(alive)[0]
-    by_score = units[np.argsort(score[units], kind="mergesort")]
-    order = by_score[np.argsort(-n_consistent[by_score], kind="mergesort")]
+    top = n_consistent.max()
+    start = np.zeros(top + 2, np.int64)  # the rank: a counting sort of by_score by top - n_consistent
+    for u in by_score:
+        if alive[u]:
+            start[top - n_consistent[u] + 1] += 1
+    start = np.cumsum(start)
+    order = np.empty(start[-1], np.int64)
+    for u in by_score:
+        if alive[u]:
+            order[start[top - n_consistent[u]]] = u
+            start[top - n_consistent[u]] += 1
     far0, far1 = kind0 == FAR, kind1 == FAR
     survive = survivors(np.concatenate((a0[far0], a1[far1])), np.concatenate((b0[far0], b1[far1])), order,
                         len(alive))
