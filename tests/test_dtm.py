@@ -74,6 +74,18 @@ def test_without_unmatched_and_permutation_invariance():
     np.testing.assert_array_equal(res_p.removed_at, res.removed_at[perm])
 
 
+def test_nearest_vertex_by_scan_or_tree_gives_the_same_result(monkeypatch):
+    """Small meshes find the expansion tests' nearest vertices by a compiled scan (cKDTree for exact ties),
+    large ones by cKDTree alone: the same outputs either way."""
+    xy0, xy1, scores, _, (u0, u1) = homography_scene(n_in=300, n_unmatched=500, seed=3)
+    scan = dtm_filter(xy0, xy1, scores, SIZE, SIZE, u0, u1)
+    monkeypatch.setattr(dtm_module, "_BRUTE_FORCE_MAX", 0)
+    tree = dtm_filter(xy0, xy1, scores, SIZE, SIZE, u0, u1)
+    assert scan.restored.any()  # the expansion ran its transfer tests
+    for name in ("keep", "removed_at", "restored"):
+        np.testing.assert_array_equal(getattr(scan, name), getattr(tree, name))
+
+
 @pytest.mark.parametrize("seed", [0, 2])
 def test_small_block_low_inlier_ratio(seed):
     """A Slime-sized block (256 x 256 px, 100 candidates, 40% inliers of an affine map, scores unrelated to

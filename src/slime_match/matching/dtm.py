@@ -69,6 +69,7 @@ log = logging.getLogger("slime_match")
 _PARALLEL_MIN = 6000  # points (candidates + unmatched) from which both meshes are built in two threads
 _RIDGE = 1.0  # px^2, local affine fits: negligible against real neighbourhoods, decisive for degenerate ones
 _NO_POINTS = np.empty((0, 2))
+_BRUTE_FORCE_MAX = 1 << 20  # vertices x queries up to which a compiled scan finds nearest vertices (~1 ms)
 
 
 @dataclass
@@ -245,9 +246,12 @@ def _transfer_ok(mesh: _Mesh, dst_v: np.ndarray, q_src: np.ndarray, q_dst: np.nd
         (P,) bool.
     """
     tri, n = mesh.tri, len(mesh.vertex)
-    nearest, tied = nearest_point(tri.points, n, q_src)
-    if tied.any():  # cKDTree's pick among equidistant vertices: it seeds the walk and maps border corners
-        nearest[tied] = mesh.tree.query(q_src[tied])[1]
+    if n * len(q_src) <= _BRUTE_FORCE_MAX:
+        nearest, tied = nearest_point(tri.points, n, q_src)
+        if tied.any():  # cKDTree's pick among equidistant vertices: it seeds the walk and maps border corners
+            nearest[tied] = mesh.tree.query(q_src[tied])[1]
+    else:
+        nearest = mesh.tree.query(q_src)[1]
     affine, offset = mesh.local_affine(dst_v)
     return transfer_test(tri.points, tri.simplices, tri.walk[3], n, tri.locate(q_src, nearest), nearest, dst_v,
                          affine, offset, np.ascontiguousarray(q_dst, np.float64), tol)
