@@ -4,6 +4,8 @@ import os
 from pathlib import Path
 
 import pytest
+import torch
+import torch.nn.functional as F
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = (ROOT.parent / "shared").resolve()
@@ -24,3 +26,12 @@ def require(path: Path) -> Path:
 @pytest.fixture
 def data_dir() -> Path:
     return require(DATA)
+
+
+def random_patches(n: int, seed: int = 0) -> torch.Tensor:
+    """(n, 1, 32, 32) patches: half random noise, half smooth (blob-like), the first 3 flat."""
+    g = torch.Generator().manual_seed(seed)
+    x = torch.rand(n, 1, 32, 32, generator=g)
+    x[: n // 2] = F.avg_pool2d(torch.rand(n // 2, 1, 40, 40, generator=g), 9, 1)
+    x[:3] = 0.4
+    return x

@@ -6,8 +6,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
-import torch.nn.functional as F
-from conftest import DATA, WEIGHTS, require
+from conftest import DATA, WEIGHTS, random_patches, require
 from kornia.feature import PatchDominantGradientOrientation, SIFTDescriptor
 from kornia.filters import spatial_gradient
 
@@ -21,18 +20,9 @@ from slime_match.features.shape import ShapeEstimator
 from slime_match.features.weights import load_model
 
 
-def _patches(n: int = 600, seed: int = 0) -> torch.Tensor:
-    """Random, smooth (blob-like) and flat 32x32 patches."""
-    g = torch.Generator().manual_seed(seed)
-    x = torch.rand(n, 1, 32, 32, generator=g)
-    x[: n // 2] = F.avg_pool2d(torch.rand(n // 2, 1, 40, 40, generator=g), 9, 1)
-    x[:3] = 0.4
-    return x
-
-
 @pytest.mark.parametrize("mode", ["diff", "sobel"])
 def test_patch_gradients_equal_kornia(mode):
-    x = _patches()
+    x = random_patches(600)
     ref = spatial_gradient(x, mode)
     gx, gy = patch_gradients(x, mode)
     assert torch.allclose(gx, ref[:, 0, 0], atol=1e-6) and torch.allclose(gy, ref[:, 0, 1], atol=1e-6)
@@ -42,7 +32,7 @@ def test_patch_gradients_equal_kornia(mode):
 
 @pytest.mark.parametrize("rootsift", [True, False])
 def test_sift_equals_kornia(rootsift):
-    x = _patches()
+    x = random_patches(600)
     ours = SIFTPatchDescriptor(32, rootsift=rootsift)(x)
     ref = SIFTDescriptor(32, rootsift=rootsift)(x)
     assert ours.shape == (600, 128)
@@ -51,7 +41,7 @@ def test_sift_equals_kornia(rootsift):
 
 
 def test_sift_rot90_permutes_cells_and_bins():
-    x = _patches()[3:]
+    x = random_patches(600)[3:]
     sift = SIFTPatchDescriptor(32)
     d = sift(x).view(-1, 8, 4, 4)
     # torch.rot90 (dims 2, 3): content turns 90 deg counter-clockwise on screen, gradient angles (atan2 in
@@ -63,7 +53,7 @@ def test_sift_rot90_permutes_cells_and_bins():
 
 
 def test_dominant_orientation_equals_kornia():
-    x = _patches()
+    x = random_patches(600)
     ours = DominantGradientOrientation(32, 36)(x)
     ref = PatchDominantGradientOrientation(32, 36)(x)
     assert torch.isfinite(ours).all()  # flat patches (the first 3) have an empty histogram: any bin is a peak
@@ -79,7 +69,7 @@ def test_fused_networks_equal_originals(name):
     assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in fused.modules())
     onednn_runs = [m for m in fused.modules() if isinstance(m, _OneDnnRun)]
     assert len(onednn_runs) == (1 if torch.backends.mkldnn.is_available() else 0)
-    x = _patches(300)
+    x = random_patches(300)
     with torch.inference_mode():
         if name == "affnet":
             a, b = (m.features(m._normalize_input(x)).flatten(1) for m in (net, fused))

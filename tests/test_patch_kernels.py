@@ -8,21 +8,13 @@ import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
+from conftest import random_patches
 from kornia.filters import spatial_gradient
 
 from slime_match.features import patch_kernels as pk
 from slime_match.features.gradients import DominantGradientOrientation, SIFTPatchDescriptor
 from slime_match.features.laf import PatchPyramid, laf_scale
 from slime_match.features.shape import _second_moments, _torch_second_moments, second_moment_shape
-
-
-def _patches(n: int = 300, seed: int = 0) -> torch.Tensor:
-    """Random, smooth and flat 32x32 patches (N, 1, 32, 32)."""
-    g = torch.Generator().manual_seed(seed)
-    x = torch.rand(n, 1, 32, 32, generator=g)
-    x[: n // 2] = F.avg_pool2d(torch.rand(n // 2, 1, 40, 40, generator=g), 9, 1)
-    x[:3] = 0.4
-    return x
 
 
 def _ramp(angle: float, p: int = 32) -> torch.Tensor:
@@ -75,7 +67,7 @@ def _reference_votes(patches: torch.Tensor, mode: str, bins: int, offset: float)
 
 
 def test_second_moments_against_reference():
-    x = _patches()
+    x = random_patches(300)
     t = torch.arange(32, dtype=torch.float64) - 15.5
     w = (torch.exp(-0.5 * (t / 7.0) ** 2)[:, None] * torch.exp(-0.5 * (t / 7.0) ** 2)[None, :]).reshape(-1)
     gx, gy, *_ = _reference_votes(x, "sobel", 8, 0.0)
@@ -88,7 +80,7 @@ def test_second_moments_against_reference():
 
 def test_sift_histograms_against_reference():
     """Dense reference: per-pixel votes in float64 pooled by the (P*P, cells) matrix of the torch path."""
-    x = _patches()
+    x = random_patches(300)
     sift = SIFTPatchDescriptor(32, rootsift=False)
     _, _, b0, b1, w0, w1 = _reference_votes(x, "diff", 8, 0.0)
     hist = torch.zeros(len(x), 8, 32 * 32, dtype=torch.float64)
@@ -102,21 +94,21 @@ def test_sift_histograms_against_reference():
 
 
 def test_sift_kernel_equals_torch_path():
-    x = _patches()
+    x = random_patches(300)
     sift = SIFTPatchDescriptor(32)
     ref = sift._normalise(sift._torch_histograms(x))
     assert (sift(x) - ref).abs().max() < 1e-5
 
 
 def test_orientation_kernel_equals_torch_path():
-    x = _patches()
+    x = random_patches(300)
     ori = DominantGradientOrientation(32, 36)
     ours, ref = ori._histograms(x), ori._torch_histograms(x)
     assert ((ours - ref).abs().max() / ref.abs().max()) < 1e-5
 
 
 def test_second_moment_kernel_equals_torch_path():
-    x = _patches()
+    x = random_patches(300)
     t = torch.arange(32, dtype=torch.float32) - 15.5
     w1 = torch.exp(-0.5 * (t / 10.0) ** 2)
     ours, ref = _second_moments(x, 10.0), _torch_second_moments(x, w1[:, None] * w1[None, :])
