@@ -100,6 +100,7 @@ def _features_to_numpy(features: Features) -> tuple[np.ndarray | None, ...]:
 
 
 def _features_from_numpy(arrays: tuple[np.ndarray | None, ...], device: torch.device) -> Features:
+    """Features on ``device`` from the arrays of ``_features_to_numpy``."""
     return Features(*(None if a is None else torch.from_numpy(a).to(device) for a in arrays))
 
 
