@@ -89,10 +89,6 @@ def translate_features(features: Features, offset: tuple[float, float]) -> Featu
     return Features(laf, features.descriptors, features.response, shape_laf)
 
 
-def _detect(pipeline: BasePipeline, context: Any, regions_only: bool) -> Features:
-    return pipeline.detect_regions(context) if regions_only else pipeline.detect(context)
-
-
 def _features_to_numpy(features: Features) -> tuple[np.ndarray | None, ...]:
     """The arrays of features (CPU numpy), to send from a forked worker: torch would pickle shared memory."""
     return tuple(None if t is None else t.detach().cpu().numpy() for t in
@@ -134,6 +130,11 @@ class _Detection:
     context: Any
     block: Block | None
 
+    @property
+    def pixels(self) -> int:
+        """Size of the detected image (the block crop or the whole scaled image), pixels."""
+        return int(np.prod(self.block.shape if self.block is not None else self.scaled.shape[:2]))
+
 
 def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], workers: int = 1
                       ) -> list[list[ScaleLevel]]:
@@ -158,13 +159,13 @@ def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], work
             else:
                 detections += [_Detection(r, [i], scaled, pipeline.prepare(blocks[i].crop(scaled)), blocks[i])
                                for i in members_blocks]
-    order = sorted(range(len(detections)), key=lambda k: -detections[k].scaled.size if detections[k].block is None
-                   else -np.prod(detections[k].block.shape))
+    order = sorted(range(len(detections)), key=lambda k: -detections[k].pixels)
     forked = workers > 1
 
     def detect(k: int) -> Features | tuple:
         d = detections[order[k]]
-        features = _detect(pipeline, d.context, requests[d.request].regions_only)
+        regions_only = requests[d.request].regions_only
+        features = pipeline.detect_regions(d.context) if regions_only else pipeline.detect(d.context)
         return _features_to_numpy(features) if forked else features
 
     found: list[Any] = [None] * len(detections)
