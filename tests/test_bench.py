@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import math
+import re
+import shutil
 
 import cv2
 import numpy as np
@@ -14,6 +17,7 @@ from conftest import DATA, require
 from slime_match.errors import ConfigError
 from slime_match.eval import bench, methods, report
 from slime_match.eval import metrics as M
+from slime_match.eval.code_version import UNKNOWN, code_version
 
 HZ_FREE = "hz+:descriptor=rootsift,shape=baumberg,orientation=gradient,max_keypoints=600"
 METHODS = f"rootsift;{HZ_FREE}"
@@ -108,6 +112,27 @@ def test_rerun_loads_cache_without_recomputing(first_run, tiny_data, monkeypatch
     assert bench.main(_args(tiny_data, out)) == 0
     assert {p: p.stat().st_mtime_ns for p in (out / "predictions").rglob("*.npz")} == before
     assert (out / "table.csv").read_text() == table  # metrics are deterministic under the seed
+
+
+def test_code_version_format():
+    assert re.fullmatch(r"\d+\.\d+\.\d+(\+g[0-9a-f]{4,40}(\.dirty)?)?", code_version())
+
+
+def test_predictions_record_their_code_and_stale_ones_are_reported(first_run, tiny_data, tmp_path, caplog):
+    out, _ = first_run
+    summary = json.loads((out / "metrics.json").read_text())
+    assert {m["code"] for p in summary["pairs"] for m in p["methods"].values()} == {code_version()}
+    copy = tmp_path / "results"
+    shutil.copytree(out, copy)
+    old = next((copy / "predictions" / "rootsift").glob("*.npz"))
+    with np.load(old) as data:  # a prediction written before code versions were recorded
+        np.savez(old, **{k: data[k] for k in data.files if k != "code"})
+    with caplog.at_level(logging.WARNING, logger="slime_match"):
+        assert bench.main(_args(tiny_data, copy)) == 0
+    assert f"1 predictions of rootsift come from code {UNKNOWN}" in caplog.text
+    times = (copy / "table.md").read_text().split("### Time per pair")[1]
+    rootsift = next(line for line in times.splitlines() if line.startswith("| RootSIFT |"))
+    assert rootsift.endswith(f"| {code_version()} (2), {UNKNOWN} (1) |")  # most pairs first
 
 
 def test_table_consistent_with_metrics(first_run):

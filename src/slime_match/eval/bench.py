@@ -30,6 +30,7 @@ from tqdm import tqdm
 
 from slime_match.errors import ConfigError
 from slime_match.eval import metrics as M
+from slime_match.eval.code_version import UNKNOWN, code_version
 from slime_match.eval.datasets import Pair, load_dataset, protocol_resize, rotated_pair, to_original
 from slime_match.eval.methods import PAPER_METHODS, make_method, method_label, parse_method_spec
 from slime_match.geometry.backends import estimate_geometry
@@ -129,7 +130,8 @@ def load_pair_images(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
 
 
 def predict(method, pair: Pair, images: tuple[np.ndarray, np.ndarray]) -> dict[str, np.ndarray]:
-    """Run a method on a pair under the protocol resize; keypoints come back in the original frame."""
+    """Run a method on a pair under the protocol resize; keypoints come back in the original frame, with the
+    matching seconds and the :func:`code_version` that computed them."""
     (im0, s0), (im1, s1) = (protocol_resize(im, pair.max_side, pair.size) for im in images)
     xy0, xy1, scores, seconds = method(im0, im1)
     return {
@@ -137,6 +139,7 @@ def predict(method, pair: Pair, images: tuple[np.ndarray, np.ndarray]) -> dict[s
         "keypoints1": to_original(np.asarray(xy1, np.float64).reshape(-1, 2), s1),
         "scores": np.asarray(scores, np.float64).reshape(-1),
         "seconds": np.float64(seconds),
+        "code": np.str_(code_version()),
     }
 
 
@@ -276,7 +279,20 @@ def evaluate_pair(
 
 def _load_prediction(path: Path) -> dict[str, np.ndarray]:
     with np.load(path) as data:
-        return {k: data[k] for k in ("keypoints0", "keypoints1", "scores", "seconds")}
+        pred = {k: data[k] for k in ("keypoints0", "keypoints1", "scores", "seconds")}
+        pred["code"] = data["code"] if "code" in data.files else np.str_(UNKNOWN)
+        return pred
+
+
+def _warn_stale(codes: dict[str, list[str]], out: Path) -> None:
+    """Log the methods whose cached predictions come from code other than the running one."""
+    for label, versions in codes.items():
+        stale = [v for v in versions if v != code_version()]
+        if stale:
+            logger.warning(
+                "bench: %d predictions of %s come from code %s, not the running %s; delete %s to recompute",
+                len(stale), label, ", ".join(sorted(set(stale))), code_version(), out / "predictions" / label,
+            )
 
 
 def run_bench(config: BenchConfig) -> dict[str, Any]:
@@ -296,13 +312,14 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
     labels = {spec: method_label(spec) for spec in config.methods}
     methods: dict[str, Any] = {}  # built lazily, only when a prediction is missing
     records, stats = [], {"computed": 0, "cached": 0}
+    codes: dict[str, list[str]] = {labels[s]: [] for s in config.methods}
     map_dir = out / "maps"
     progress = tqdm(
         total=len(pairs) * len(config.methods), desc="bench", unit="pred", file=sys.stderr, disable=None
     )
     for index, (spec, pair) in enumerate(pairs):
         images = load_pair_images(pair)
-        raw, seconds = {}, {}
+        raw, seconds, code = {}, {}, {}
         for mspec in config.methods:
             label = labels[mspec]
             path = out / "predictions" / label / f"{pair_slug(pair.name)}.npz"
@@ -318,6 +335,8 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
                 stats["computed"] += 1
             raw[label] = (pred["keypoints0"], pred["keypoints1"])
             seconds[label] = float(pred["seconds"])
+            code[label] = str(pred["code"])
+            codes[label].append(code[label])
             progress.update()
         gt = pair_gt(pair, images)
         per_method, extras = evaluate_pair(gt, raw, config)
@@ -331,6 +350,7 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
                 "methods": {
                     lab: {
                         "seconds": seconds[lab],
+                        "code": code[lab],
                         "raw_matches": len(raw[lab][0]),
                         "thresholds": per_method[lab],
                     }
@@ -341,6 +361,7 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
         if index < config.map_pairs:
             report.write_pair_maps(map_dir / pair_slug(pair.name), images, gt, extras, config.t_perp)
     progress.close()
+    _warn_stale(codes, out)
     started = time.strftime("%Y-%m-%d %H:%M:%S")
     summary = {
         "config": asdict(config),

@@ -19,12 +19,14 @@ import io
 import json
 import math
 import sys
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from slime_match.eval import metrics as M
+from slime_match.eval.code_version import UNKNOWN
 from slime_match.eval.methods import method_title
 from slime_match.geometry.homography import project
 from slime_match.io import _atomic_write, save_figure
@@ -56,7 +58,7 @@ def aggregate(summary: dict[str, Any]) -> dict[str, Any]:
     Returns:
         {"rows": {(group, method, threshold): {column: value, "pairs": n}}, "rotation_rows": the same for
         the planar pairs split into ``ROTATION_GROUPS`` (empty unless both kinds exist), "best": {method: threshold},
-        "seconds": {method: {"mean": s, "pairs": n}}, "pose": {(method, threshold): {"auc@5": ...,
+        "seconds": {method: {"mean": s, "pairs": n, "code": {code version: pairs}}}, "pose": {(method, threshold): {"auc@5": ...,
         "essential_threshold": t, "pairs": n}}}
     """
     cfg = summary["config"]
@@ -78,7 +80,11 @@ def aggregate(summary: dict[str, Any]) -> dict[str, Any]:
         for m in methods
     }
     seconds = {
-        m: {"mean": float(np.mean([p["methods"][m]["seconds"] for p in pairs])), "pairs": len(pairs)}
+        m: {
+            "mean": float(np.mean([p["methods"][m]["seconds"] for p in pairs])),
+            "pairs": len(pairs),
+            "code": dict(Counter(p["methods"][m].get("code", UNKNOWN) for p in pairs)),
+        }
         for m in methods
     }
     return {
@@ -212,13 +218,13 @@ def markdown_tables(summary: dict[str, Any], agg: dict[str, Any]) -> str:
         "",
         "### Time per pair (matching only, models loaded; RANSAC excluded)",
         "",
-        "| Method | mean seconds per pair | pairs |",
-        "| --- | --- | --- |",
+        "| Method | mean seconds per pair | pairs | code version (pairs) |",
+        "| --- | --- | --- | --- |",
     ]
-    lines += [
-        f"| {method_title(summary['methods'][m])} | {agg['seconds'][m]['mean']:.2f} | {agg['seconds'][m]['pairs']} |"
-        for m in methods
-    ]
+    for m in methods:
+        t = agg["seconds"][m]
+        code = ", ".join(f"{v} ({n})" for v, n in sorted(t["code"].items(), key=lambda kv: (-kv[1], kv[0])))
+        lines.append(f"| {method_title(summary['methods'][m])} | {t['mean']:.2f} | {t['pairs']} | {code} |")
     return "\n".join(lines) + "\n"
 
 

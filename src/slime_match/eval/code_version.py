@@ -1,0 +1,42 @@
+"""Which code produced a cached prediction: the package version plus, in a git checkout, the commit.
+
+A benchmark cache outlives the code that filled it; recording the code version with every prediction lets
+the report say which predictions are stale (``slime bench`` warns about them, the time table lists them).
+"""
+
+from __future__ import annotations
+
+import subprocess
+from functools import lru_cache
+from pathlib import Path
+
+import slime_match
+
+UNKNOWN = "unknown"  # predictions written before the version was recorded
+
+
+def _git(*args: str) -> str | None:
+    """Output of a git command run in the package folder; None outside a checkout or without git."""
+    try:
+        done = subprocess.run(
+            ["git", *args],
+            cwd=Path(slime_match.__file__).parent,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return done.stdout.strip() if done.returncode == 0 else None
+
+
+@lru_cache(maxsize=1)
+def code_version() -> str:
+    """``"<version>"``, or ``"<version>+g<commit>"`` in a git checkout, with ``".dirty"`` appended when the
+    package's own files differ from that commit (e.g. ``"0.1.0+g2185a31.dirty"``)."""
+    commit = _git("rev-parse", "--short", "HEAD")
+    if not commit:
+        return slime_match.__version__
+    dirty = _git("status", "--porcelain", "--untracked-files=no", "--", ".")
+    return f"{slime_match.__version__}+g{commit}{'.dirty' if dirty else ''}"
