@@ -36,7 +36,7 @@ def code_version() -> str:
     """``"<version>"``, or ``"<version>+g<commit>"`` in a git checkout, with ``".dirty"`` appended when the
     package's own files differ from that commit (e.g. ``"0.1.0+g2185a31.dirty"``)."""
     commit = _git("rev-parse", "--short", "HEAD")
-    if not commit:
+    if not commit or not _git("ls-files", "__init__.py"):  # not a checkout, or one that does not track us
         return slime_match.__version__
     dirty = _git("status", "--porcelain", "--untracked-files=no", "--", ".")
     return f"{slime_match.__version__}+g{commit}{'.dirty' if dirty else ''}"
