@@ -89,8 +89,8 @@ def test_global_dtm_merges_exact_duplicates():
 
 
 def test_cluster_representatives_and_shared_verdicts():
-    """Matches in the same 2 px cell at both ends form one cluster, represented by its best-scored match; in
-    global_dtm the members of a cluster share its verdict (kept or dropped together)."""
+    """Matches within 4 px of a better one at both ends join its cluster, represented by its best-scored
+    match; in global_dtm the members of a cluster share its verdict (kept or dropped together)."""
     xy0 = np.array([[10.2, 10.1], [11.9, 10.4], [10.5, 11.5], [30.0, 30.0], [10.2, 10.1]])
     xy1 = np.array([[20.0, 20.0], [20.5, 21.0], [25.0, 20.0], [40.0, 40.0], [20.1, 20.2]])
     scores = np.array([0.5, 0.2, 0.1, 0.3, 0.4])
@@ -110,6 +110,21 @@ def test_cluster_representatives_and_shared_verdicts():
         verdicts = {tuple(r) in kept for r in both[member == c]}
         assert len(verdicts) == 1
     assert len(k0) > 250
+
+
+def test_cluster_representatives_are_apart_and_members_near():
+    rng = np.random.default_rng(7)
+    xy0 = rng.uniform(0, 60, (3000, 2))
+    xy1 = xy0 * 1.1 + rng.normal(0, 2, (3000, 2))
+    scores = rng.uniform(0, 1, 3000)
+    rep, cluster = cluster_representatives(xy0, xy1, scores, radius=4.0)
+    ends = np.hstack([xy0, xy1])
+    gap = np.abs(ends[rep][:, None] - ends[rep][None]).max(axis=2)
+    np.fill_diagonal(gap, np.inf)
+    assert gap.min() > 4.0  # no representative within the radius of another at both ends
+    assert np.abs(ends - ends[rep[cluster]]).max() <= 4.0  # every member near its representative
+    assert np.all(cluster[rep] == np.arange(len(rep)))
+    assert np.all(scores[rep[cluster]] <= scores)  # the representative is the best-scored member
 
 
 def test_torch_threads_restores_setting():
