@@ -284,10 +284,11 @@ def _load_prediction(path: Path) -> dict[str, np.ndarray]:
         return pred
 
 
-def _warn_stale(codes: dict[str, list[str]], out: Path) -> None:
-    """Log the methods whose cached predictions come from code other than the running one."""
-    for label, versions in codes.items():
-        stale = [v for v in versions if v != code_version()]
+def _warn_stale(records: list[dict[str, Any]], out: Path) -> None:
+    """Log the methods whose predictions (per-pair ``records`` of ``run_bench``) come from code other than
+    the running one."""
+    for label in records[0]["methods"]:
+        stale = [r["methods"][label]["code"] for r in records if r["methods"][label]["code"] != code_version()]
         if stale:
             logger.warning(
                 "bench: %d predictions of %s come from code %s, not the running %s; delete %s to recompute",
@@ -312,7 +313,6 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
     labels = {spec: method_label(spec) for spec in config.methods}
     methods: dict[str, Any] = {}  # built lazily, only when a prediction is missing
     records, stats = [], {"computed": 0, "cached": 0}
-    codes: dict[str, list[str]] = {labels[s]: [] for s in config.methods}
     map_dir = out / "maps"
     progress = tqdm(
         total=len(pairs) * len(config.methods), desc="bench", unit="pred", file=sys.stderr, disable=None
@@ -336,7 +336,6 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
             raw[label] = (pred["keypoints0"], pred["keypoints1"])
             seconds[label] = float(pred["seconds"])
             code[label] = str(pred["code"])
-            codes[label].append(code[label])
             progress.update()
         gt = pair_gt(pair, images)
         per_method, extras = evaluate_pair(gt, raw, config)
@@ -361,7 +360,7 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
         if index < config.map_pairs:
             report.write_pair_maps(map_dir / pair_slug(pair.name), images, gt, extras, config.t_perp)
     progress.close()
-    _warn_stale(codes, out)
+    _warn_stale(records, out)
     started = time.strftime("%Y-%m-%d %H:%M:%S")
     summary = {
         "config": asdict(config),
