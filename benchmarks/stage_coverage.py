@@ -1,0 +1,137 @@
+"""Where Slime's coverage goes: coverage and precision of every stage's matches on planar ground-truth pairs,
+next to the base Hz+ and to a bound from detection alone.
+
+    python benchmarks/stage_coverage.py graf hpatches [--rotations 90,180] [--descriptor tfeat]
+        [--out results/stage_coverage.json]
+
+Per pair (raw matches, correct = two-sided error < 15 px, the paper's coverage: min of the two images):
+- ``repeatable``: HarrisZ+ keypoints of the whole image whose ground-truth partner has a detected keypoint
+  within 15 px in the other image, matched to that partner: a loose upper bound for any matcher built on
+  these detections.
+- ``hz+``: the base pipeline.
+- Slime's stages (Secs. 3.2-3.8): ``block_matches`` (all block-pair planes M_l), ``expanded`` (in some P_l),
+  ``superset`` (H), ``epipolar`` (H after the Sec. 3.6 vote), ``fbar`` (F-bar, two sets a tile),
+  ``ftheta`` (fused, orientation-filtered F^theta), ``tile_matches`` (Sec. 3.8 before the global DTM),
+  ``final``.
+A stage whose coverage falls well below the previous one is where area is lost.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+from scipy.spatial import cKDTree
+
+from slime_match.config import make_config
+from slime_match.eval.datasets import load_dataset, protocol_resize, rotated_pair, to_original
+from slime_match.eval.metrics import correct_matches_homography, coverage, valid_area_homography
+from slime_match.features.harrisz import detect_harrisz
+from slime_match.io import load_image
+from slime_match.matcher import Matcher
+
+STAGES = ("block_matches", "expanded", "superset", "epipolar", "fbar", "ftheta", "tile_matches", "final")
+
+
+def project(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """(N, 2) points mapped by the homography H."""
+    p = np.c_[xy, np.ones(len(xy))] @ H.T
+    return p[:, :2] / p[:, 2:]
+
+
+def repeatable_matches(image0: np.ndarray, image1: np.ndarray, H: np.ndarray, t: float = 15.0
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 2) x (N, 2): every HarrisZ+ keypoint with a detected keypoint within ``t`` px of its ground-truth
+    position in the other image, paired with that position (both directions)."""
+    kp = [detect_harrisz(torch.from_numpy(im).permute(2, 0, 1).float()).xy.numpy().astype(np.float64)
+          for im in (image0, image1)]
+    if not len(kp[0]) or not len(kp[1]):
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    to1, to0 = project(H, kp[0]), project(np.linalg.inv(H), kp[1])
+    near1 = cKDTree(kp[1]).query(to1)[0] < t
+    near0 = cKDTree(kp[0]).query(to0)[0] < t
+    return np.r_[kp[0][near1], to0[near0]], np.r_[to1[near1], kp[1][near0]]
+
+
+def stage_matches(stages: dict[str, np.ndarray]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The matches of every stage in ``STAGES`` from a Slime result's ``stages`` arrays (matcher frame)."""
+    t0, t1 = stages["table_xy0"], stages["table_xy1"]
+
+    def rows(index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return t0[index], t1[index]
+
+    superset = np.unique(stages["superset_indices"])
+    return {
+        "block_matches": (t0, t1),
+        "expanded": rows(np.unique(stages["expanded_match"])),
+        "superset": rows(superset),
+        "epipolar": rows(superset[stages["epipolar_keep"][superset]]),
+        "fbar": rows(np.unique(stages["fbar_indices"])),
+        "ftheta": rows(np.unique(stages["ftheta_indices"])),
+        "tile_matches": (stages["tile_matches_xy0"], stages["tile_matches_xy1"]),
+        "final": (stages["final_xy0"], stages["final_xy1"]),
+    }
+
+
+def pair_row(pair, slime: Matcher, base: Matcher) -> dict[str, dict[str, float]]:
+    """{entry: {matches, correct, precision, coverage}} for the bound, Hz+ and every Slime stage."""
+    image0, image1 = load_image(pair.image0), load_image(pair.image1)
+    valid0, valid1 = valid_area_homography(pair.H, image0.shape[:2], image1.shape[:2], pair.mask0, pair.mask1)
+    (a, s0), (b, s1) = (protocol_resize(im, pair.max_side, pair.size) for im in (image0, image1))
+
+    def score(x0: np.ndarray, x1: np.ndarray, frame: bool = True) -> dict[str, float]:
+        if frame:
+            x0, x1 = to_original(x0, s0), to_original(x1, s1)
+        ok = correct_matches_homography(x0, x1, pair.H, mask0=pair.mask0, mask1=pair.mask1)
+        cov = coverage(x0[ok], x1[ok], image0.shape[:2], image1.shape[:2], valid0, valid1)
+        return {"matches": len(ok), "correct": int(ok.sum()), "precision": float(ok.mean()) if len(ok) else 0.0,
+                "coverage": cov}
+
+    row = {"repeatable": score(*repeatable_matches(image0, image1, pair.H), frame=False)}
+    hz = base(a, b)
+    row["hz+"] = score(hz.keypoints0, hz.keypoints1, frame=False)
+    result = slime(a, b)
+    for name, (x0, x1) in stage_matches(result.stages).items():
+        row[name] = score(x0, x1)
+    return row
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("datasets", nargs="+", help="planar datasets: graf, hpatches, planar:<dir>, ...")
+    parser.add_argument("--rotations", default="", help="rotated variants to add, degrees, e.g. 90,180")
+    parser.add_argument("--descriptor", default="tfeat", help="descriptor of Hz+ and of Slime's base")
+    parser.add_argument("--out", type=Path, default=Path("results/stage_coverage.json"))
+    args = parser.parse_args()
+    slime_config = make_config("slime", descriptor=args.descriptor)
+    slime_config.slime.keep_stages = True
+    slime, base = Matcher(slime_config), Matcher(make_config("hz+", descriptor=args.descriptor))
+    angles = [float(a) for a in args.rotations.split(",") if a.strip()]
+    rows = {}
+    for spec in args.datasets:
+        for pair in load_dataset(spec):
+            if pair.kind != "homography":
+                raise SystemExit(f"{spec}: {pair.name} has no ground-truth homography (planar datasets only)")
+            variants = [pair] + [rotated_pair(replace(pair, image1=load_image(pair.image1)), a) for a in angles]
+            for p in variants:
+                rows[f"{spec}/{p.name}"] = row = pair_row(p, slime, base)
+                print(f"{spec}/{p.name}: " + ", ".join(f"{k} {v['coverage']:.3f}" for k, v in row.items()), flush=True)
+    if not rows:
+        raise SystemExit(f"no pair in {args.datasets}")
+    entries = list(next(iter(rows.values())))
+    mean = {k: {m: float(np.mean([r[k][m] for r in rows.values()])) for m in ("coverage", "precision")}
+            for k in entries}
+    print(f"\nmean over {len(rows)} pairs (coverage / precision):")
+    for k, v in mean.items():
+        print(f"  {k:14s} {v['coverage']:.3f} / {v['precision']:.3f}")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps({"descriptor": args.descriptor, "pairs": rows, "mean": mean}, indent=1))
+    print(f"written {args.out}")
+
+
+if __name__ == "__main__":
+    main()
