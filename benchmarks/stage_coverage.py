@@ -31,16 +31,11 @@ from slime_match.config import make_config
 from slime_match.eval.datasets import load_dataset, protocol_resize, rotated_pair, to_original
 from slime_match.eval.metrics import correct_matches_homography, coverage, valid_area_homography
 from slime_match.features.harrisz import detect_harrisz
+from slime_match.geometry.homography import project
 from slime_match.io import load_image
 from slime_match.matcher import Matcher
 
 STAGES = ("block_matches", "expanded", "superset", "epipolar", "fbar", "ftheta", "tile_matches", "final")
-
-
-def project(H: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """(N, 2) points mapped by the homography H."""
-    p = np.c_[xy, np.ones(len(xy))] @ H.T
-    return p[:, :2] / p[:, 2:]
 
 
 def repeatable_matches(image0: np.ndarray, image1: np.ndarray, H: np.ndarray, t: float = 15.0
@@ -51,9 +46,14 @@ def repeatable_matches(image0: np.ndarray, image1: np.ndarray, H: np.ndarray, t:
           for im in (image0, image1)]
     if not len(kp[0]) or not len(kp[1]):
         return np.zeros((0, 2)), np.zeros((0, 2))
-    to1, to0 = project(H, kp[0]), project(np.linalg.inv(H), kp[1])
-    near1 = cKDTree(kp[1]).query(to1)[0] < t
-    near0 = cKDTree(kp[0]).query(to0)[0] < t
+    to1, to0 = project(H, kp[0])[0], project(np.linalg.inv(H), kp[1])[0]
+
+    def near(points: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        out = np.isfinite(targets).all(axis=1)  # points on the vanishing line map to infinity
+        out[out] = cKDTree(points).query(targets[out])[0] < t
+        return out
+
+    near1, near0 = near(kp[1], to1), near(kp[0], to0)
     return np.r_[kp[0][near1], to0[near0]], np.r_[to1[near1], kp[1][near0]]
 
 

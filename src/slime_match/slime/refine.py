@@ -113,19 +113,12 @@ def match_tiles(
 
 def merge_duplicates(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray) -> tuple[np.ndarray, np.ndarray,
                                                                                   np.ndarray]:
-    """Matches (K, 2), (K, 2), (K,) without exact duplicates (the best-scored one kept), in input order."""
-    unique = np.sort(_best_per_group(np.round(np.hstack([xy0, xy1]), 4), scores)[0])
-    return xy0[unique], xy1[unique], scores[unique]
-
-
-def _best_per_group(keys: np.ndarray, scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rows (K, D) grouped by equal keys: (G,) index of each group's best-scored row (ties: the first), groups
-    in ascending key order, and (K,) group of each row."""
+    """Matches (K, 2), (K, 2), (K,) without exact duplicates (the best-scored one kept, ties: the first), in
+    input order."""
     order = np.argsort(scores, kind="stable")
-    _, first, group = np.unique(keys[order], axis=0, return_index=True, return_inverse=True)
-    of_row = np.empty(len(keys), np.int64)
-    of_row[order] = group.reshape(-1)
-    return order[first], of_row
+    _, first = np.unique(np.round(np.hstack([xy0, xy1]), 4)[order], axis=0, return_index=True)
+    unique = np.sort(order[first])
+    return xy0[unique], xy1[unique], scores[unique]
 
 
 CLUSTER_RADIUS = 4.0  # px: a match within this distance of a better one at both ends joins its cluster
