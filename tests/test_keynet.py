@@ -55,6 +55,24 @@ def test_keynet_features_and_fixed_orientation(graf_small):
     assert torch.equal(regions.shape_laf, features.shape_laf) and regions.descriptors.shape == (len(features), 0)
 
 
+def test_keynet_descriptors_follow_kornia_patch_convention(graf_small):
+    """Our patch stages on Key.Net's frames describe what kornia's LAFDescriptor does (magnification 1 on
+    kornia's LAFs); a wrong magnification (1.5) drops the median cosine to ~0.7."""
+    import kornia.feature as KF
+
+    from slime_match.features.weights import load_model
+
+    a, _, _ = graf_small
+    pipeline = KeyNetPipeline(BaseConfig(name="keynet", descriptor="tfeat"), torch.device("cpu"))
+    context = pipeline.prepare(a)
+    features = pipeline.detect(context)
+    kornia_descriptor = KF.LAFDescriptor(load_model("tfeat"), patch_size=32, grayscale_descriptor=True).eval()
+    with torch.no_grad():
+        reference = torch.nn.functional.normalize(kornia_descriptor(context.grey, features.laf[None])[0], dim=1)
+    cosine = (reference * features.descriptors).sum(1)
+    assert cosine.median() > 0.98 and (cosine > 0.9).float().mean() > 0.9, (cosine.median(), cosine.min())
+
+
 def test_keynet_and_slimed_keynet_on_a_real_pair(graf_small, monkeypatch):
     a, b, h = graf_small
     base = Matcher(make_config("keynet", descriptor="tfeat", device="cpu"))(a, b)

@@ -125,3 +125,14 @@ def test_pyramid_handles_grey_and_empty():
     pyr = PatchPyramid(torch.rand(1, 64, 80))
     assert pyr.levels[0].shape == (1, 1, 64, 80) and [lv.shape[-1] for lv in pyr.levels] == [80, 40, 20]
     assert pyr.extract(torch.zeros(0, 2, 3)).shape == (0, 1, 32, 32)
+
+
+@pytest.mark.parametrize("decimation_sigma, sigma", [(None, math.sqrt(4.0 - 0.25)), (1.0, 1.0)])
+def test_pyramid_level_blur(decimation_sigma, sigma):
+    """An impulse at an even pixel: level 1 samples the blur kernel every 2 parent pixels, so neighbours
+    fall by exp(-2^2 / (2 sigma^2)); by default sigma reaches 2 parent px from 0.5, kornia-like it is 1."""
+    img = torch.zeros(1, 64, 64)
+    img[0, 32, 32] = 1.0
+    level = PatchPyramid(img, decimation_sigma=decimation_sigma).levels[1][0, 0]
+    ratio = float(level[16, 17] / level[16, 16])
+    assert ratio == pytest.approx(math.exp(-2.0 / sigma**2), rel=1e-3)

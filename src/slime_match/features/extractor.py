@@ -73,7 +73,7 @@ class PatchConfig:
 
 
 class LocalFeatureExtractor:
-    """Describe HarrisZ+ keypoints: ellipse -> LAF -> shape -> orientation -> descriptor.
+    """Describe keypoints: ellipse (HarrisZ+) or LAF (Key.Net) -> shape -> orientation -> descriptor.
 
     Args:
         config: pipeline options.
@@ -111,16 +111,32 @@ class LocalFeatureExtractor:
             (upright affine-normalised frames, for :meth:`describe_fixed`).
         """
         pyr = pyramid if pyramid is not None else self.pyramid(image)
-        shape_laf = self.shape_frames(pyr, keypoints)
-        oriented = self.orienter(pyr, shape_laf)
-        desc = self.descriptor(pyr, oriented)
-        response = keypoints.response.to(self.device, torch.float32)
+        return self.extract_frames(pyr, keypoint_frames(keypoints, self.device), keypoints.response)
+
+    def extract_frames(self, pyramid: PatchPyramid, laf: torch.Tensor, response: torch.Tensor) -> Features:
+        """Described features of a detector's frames (another detector's LAFs, e.g. Key.Net's).
+
+        Args:
+            pyramid: the image's pyramid.
+            laf: (N, 2, 3) frames in pixels, any orientation (only centre, scale and ellipse are used).
+            response: (N,) detector responses to carry.
+
+        Returns:
+            Features as :meth:`extract`.
+        """
+        shape_laf = self.adapt_shape(pyramid, laf)
+        oriented = self.orienter(pyramid, shape_laf)
+        desc = self.descriptor(pyramid, oriented)
+        response = response.to(self.device, torch.float32)
         return Features(laf=oriented, descriptors=desc, response=response, shape_laf=shape_laf)
 
     def shape_frames(self, pyramid: PatchPyramid, keypoints: Keypoints) -> torch.Tensor:
         """(N, 2, 3) upright affine-normalised frames of keypoints (ellipse -> LAF -> shape estimator)."""
-        xy = keypoints.xy.to(self.device, torch.float32)
-        laf = ellipse_to_laf(xy, keypoints.ellipse.to(self.device, torch.float32))
+        return self.adapt_shape(pyramid, keypoint_frames(keypoints, self.device))
+
+    def adapt_shape(self, pyramid: PatchPyramid, laf: torch.Tensor) -> torch.Tensor:
+        """(N, 2, 3) upright frames of LAFs (N, 2, 3) after the shape estimator (upright input without one)."""
+        laf = laf.to(self.device, torch.float32)
         return self.shape(pyramid, laf) if self.shape is not None else set_laf_angle(laf, 0.0)
 
     def describe_fixed(
@@ -142,6 +158,12 @@ class LocalFeatureExtractor:
         if response is None:
             response = torch.zeros(laf.shape[0], device=laf.device)
         return Features(laf=laf, descriptors=desc, response=response.to(laf.device), shape_laf=shape_laf)
+
+
+def keypoint_frames(keypoints: Keypoints, device: torch.device) -> torch.Tensor:
+    """(N, 2, 3) LAFs mapping the unit circle onto the keypoints' ellipses, on ``device``."""
+    xy = keypoints.xy.to(device, torch.float32)
+    return ellipse_to_laf(xy, keypoints.ellipse.to(device, torch.float32))
 
 
 @cache

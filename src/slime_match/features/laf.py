@@ -160,7 +160,9 @@ class PatchPyramid:
     """Gaussian pyramid of one grey image, kept on its device, for cheap batched patch extraction.
 
     Level 0 is the image itself (assumed blur 0.5 px); level ``l >= 1`` is blurred to 1 px of its own and
-    decimated by 2, so its pixel ``k`` sits at level-0 position ``2^l k``. A patch is sampled from the level
+    decimated by 2, so its pixel ``k`` sits at level-0 position ``2^l k``. With ``decimation_sigma``, each
+    level is instead blurred by that fixed sigma (in its parent's pixels) before decimation, as kornia's
+    ``pyrdown`` does (sigma 1): sharper, slightly aliased levels. A patch is sampled from the level
     ``floor(log2(step))``, ``step`` being its sampling step in level-0 pixels, bilinearly with border
     padding: on CPU by one compiled loop over all patches
     (:func:`~slime_match.features.patch_kernels.sample_patches`), elsewhere by one ``grid_sample`` per level.
@@ -168,16 +170,18 @@ class PatchPyramid:
     Args:
         image: (C, H, W) or (H, W) float image in [0, 1], RGB or grey, on any device.
         min_size: smallest side (pixels) of the coarsest level.
+        decimation_sigma: fixed blur before each decimation (parent pixels); None = reach 1 px of the level.
     """
 
-    def __init__(self, image: torch.Tensor, min_size: int = 16) -> None:
+    def __init__(self, image: torch.Tensor, min_size: int = 16, decimation_sigma: float | None = None) -> None:
         grey = _to_grey(image)
         self.height, self.width = int(grey.shape[-2]), int(grey.shape[-1])
         self.levels: list[torch.Tensor] = [grey]
         sigma_prev = 0.5
         while min(self.levels[-1].shape[-2:]) >= 2 * min_size:
-            # Reach 2 px (= 1 px of the next level) from the current blur, then decimate.
-            x = _blur(self.levels[-1], math.sqrt(4.0 - sigma_prev**2))
+            # Default: reach 2 px (= 1 px of the next level) from the current blur, then decimate.
+            sigma = math.sqrt(4.0 - sigma_prev**2) if decimation_sigma is None else decimation_sigma
+            x = _blur(self.levels[-1], sigma)
             self.levels.append(x[:, :, ::2, ::2].contiguous())
             sigma_prev = 1.0
         sizes = [lv.shape[-2:] for lv in self.levels]
