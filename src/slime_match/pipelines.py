@@ -56,7 +56,8 @@ class BaseConfig:
         orientation: Hz+ orientation: "orinet" | "gradient" | "upright" (Key.Net: "orinet" | "upright").
         upright: no orientation estimation at all (the paper's upright variants); overrides ``orientation``.
         max_keypoints: detector cap.
-        magnification: patch magnification over the detector region (None = the extractor's default).
+        magnification: patch magnification over the detector region (None = the pipeline's default: 6 over
+            HarrisZ+'s ellipses, 1 over Key.Net's frames, which already span 6 detection scales).
         weights_dir: a folder holding the model weights (else kornia's torch-hub cache, ``TORCH_HOME``).
         fginn_ratio, fginn_radius: FGINN ratio and spatial radius (px) for the RootSIFT pipeline.
         use_dtm: run DTM after Blob matching (Hz+); False only for inspection.
@@ -299,8 +300,8 @@ class KeyNetPipeline(BasePipeline):
     the package's :class:`LocalFeatureExtractor` (compiled patch sampling, inference-folded networks), the
     same stages as Hz+, on a pyramid blurred like kornia's (``KORNIA_PYRDOWN_SIGMA``). Against kornia's own
     modules: features about 2x faster, 0.6-2.3% fewer correct matches on graf 1->2..1->4 (TFeat; 2-5% fewer
-    with the default anti-aliased pyramid). Only filled detections are kept (kornia pads to ``max_keypoints`` with zero frames).
-    AdaLAM scores are its inverse local-RANSAC confidences. A ``candidate_filter`` (Slime's tile refinement)
+    with the default anti-aliased pyramid). Only filled detections are kept (kornia pads to
+    ``max_keypoints`` with zero frames). AdaLAM scores are its inverse local-RANSAC confidences. A ``candidate_filter`` (Slime's tile refinement)
     is applied to AdaLAM's output: AdaLAM starts from every keypoint's nearest neighbour, so it cannot take
     a pre-filtered candidate list.
     """
@@ -320,12 +321,13 @@ class KeyNetPipeline(BasePipeline):
         upright = config.upright or config.orientation == "upright"
         if not upright and config.orientation != "orinet":
             raise ConfigError(f"the keynet base pipeline orients with orinet or upright, not {config.orientation!r}")
-        self.config, self.device, self.upright = config, device, upright
+        self.config, self.device = config, device
         self.detector = KF.KeyNetDetector(False, num_features=config.max_keypoints)
         self.detector.model = load_model("keynet", config.weights_dir)
         self.detector = self.detector.to(device).eval()
+        magnification = 1.0 if config.magnification is None else config.magnification
         self.patch = PatchConfig(shape="affnet", orientation="upright" if upright else "orinet",
-                                 descriptor=config.descriptor, magnification=config.magnification or 1.0,
+                                 descriptor=config.descriptor, magnification=magnification,
                                  weights_dir=config.weights_dir)
         self.extractor = LocalFeatureExtractor(self.patch, device=device)
 
