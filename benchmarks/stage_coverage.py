@@ -24,7 +24,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import torch
 from scipy.spatial import cKDTree
 
 from slime_match.config import make_config
@@ -32,7 +31,7 @@ from slime_match.eval.datasets import load_dataset, protocol_resize, rotated_pai
 from slime_match.eval.metrics import correct_matches_homography, coverage, valid_area_homography
 from slime_match.features.harrisz import detect_harrisz
 from slime_match.geometry.homography import project
-from slime_match.io import load_image
+from slime_match.io import load_image, to_tensor
 from slime_match.matcher import Matcher
 
 STAGES = ("block_matches", "expanded", "superset", "epipolar", "fbar", "ftheta", "tile_matches", "final")
@@ -42,8 +41,7 @@ def repeatable_matches(image0: np.ndarray, image1: np.ndarray, H: np.ndarray, t:
                        ) -> tuple[np.ndarray, np.ndarray]:
     """(N, 2) x (N, 2): every HarrisZ+ keypoint with a detected keypoint within ``t`` px of its ground-truth
     position in the other image, paired with that position (both directions)."""
-    kp = [detect_harrisz(torch.from_numpy(im).permute(2, 0, 1).float()).xy.numpy().astype(np.float64)
-          for im in (image0, image1)]
+    kp = [detect_harrisz(to_tensor(im)).xy.numpy().astype(np.float64) for im in (image0, image1)]
     if not len(kp[0]) or not len(kp[1]):
         return np.zeros((0, 2)), np.zeros((0, 2))
     to1, to0 = project(H, kp[0])[0], project(np.linalg.inv(H), kp[1])[0]

@@ -287,8 +287,12 @@ KORNIA_PYRDOWN_SIGMA = 1.0  # kornia's pyrdown kernel [1, 4, 6, 4, 1] / 16 has v
 
 @dataclass
 class KeyNetContext:
-    grey: torch.Tensor  # (1, 1, H, W) float luminance in [0, 1]
-    pyramid: PatchPyramid  # of the same luminance
+    pyramid: PatchPyramid  # of the image's luminance
+
+    @property
+    def grey(self) -> torch.Tensor:
+        """(1, 1, H, W) float luminance in [0, 1]: the pyramid's level 0, Key.Net's input."""
+        return self.pyramid.levels[0]
 
 
 class KeyNetPipeline(BasePipeline):
@@ -334,7 +338,7 @@ class KeyNetPipeline(BasePipeline):
     def prepare(self, image: np.ndarray) -> KeyNetContext:
         grey = cv2.cvtColor(np.ascontiguousarray(image, dtype=np.float32), cv2.COLOR_RGB2GRAY)
         grey = torch.from_numpy(grey)[None].to(self.device)
-        return KeyNetContext(grey[None], PatchPyramid(grey, decimation_sigma=KORNIA_PYRDOWN_SIGMA))
+        return KeyNetContext(PatchPyramid(grey, decimation_sigma=KORNIA_PYRDOWN_SIGMA))
 
     @torch.inference_mode()
     def _frames(self, context: KeyNetContext) -> tuple[torch.Tensor, torch.Tensor]:
