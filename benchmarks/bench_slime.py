@@ -1,5 +1,5 @@
 """Slime's speed next to its quality: per-stage seconds, peak memory, correct matches, the base Hz+ on the same
-pair, and the shared vs per-block detection ablation; OpenCV SIFT as a same-process reference.
+pair, and the shared vs per-block and per-tile detection ablation; OpenCV SIFT as a same-process reference.
 
     python benchmarks/bench_slime.py [--out results/bench_slime.json] [--descriptor tfeat] [--skip-ablation]
                                      [--skip-fast] [--skip-large]
@@ -12,8 +12,10 @@ Runs (each Slime run is timed once, after the base Hz+ on the same pair and conf
 * Slime, AffNet + OriNet + ``--descriptor`` (TFeat by default), at 640x480 and 1200x900;
 * weight-free Slime (Baumberg + gradient orientation + RootSIFT) at 640x480;
 * the ``slime-fast`` preset (block scales 1, 2 instead of the paper's 1, 2, 3), learned and weight-free, 640x480;
-* the ablation at 640x480 weight-free: shared detection (one per block scale, ours) vs per-block detection
-  (each 256 px block crop on its own, the paper's prototype) -- same pair, same everything else;
+* the ablation at 640x480, learned and weight-free: shared detection (one per block scale, ours) vs
+  per-block detection (each 256 px block crop on its own, the paper's prototype), and vs per-tile detection
+  (the blocks shared, each full-resolution tile of Sec. 3.8 detected on its own crop) -- same pair, same
+  everything else;
 * OpenCV SIFT (8000 features) detect+describe of the same images.
 
 Quality: matches correct when the two-sided GT reprojection error is below t (paper t = 15 px, and 3 px),
@@ -178,13 +180,17 @@ def bench_slime_vs_base(name: str, options: dict[str, Any], pair, device: str, t
     return out
 
 
-def bench_ablation(pair, device: str, shared_record: dict) -> dict:
-    """Weight-free Slime with per-block detection, next to the shared-detection run of the same pair."""
-    per_block = run_matcher(Matcher(make_config("slime", device=device, shared_detection=False, **WEIGHT_FREE)),
-                            pair)
-    out = {"shared": shared_record, "per_block": per_block,
-           "per_block_over_shared_time": round(per_block["wall_s"] / max(shared_record["wall_s"], 1e-9), 2)}
-    _print_ablation(out)
+ABLATIONS = {"per_block": {"shared_detection": False}, "per_tile": {"shared_tile_detection": False}}
+
+
+def bench_ablation(label: str, options: dict, pair, device: str, shared_record: dict) -> dict:
+    """Slime with ``options`` and per-block, then per-tile detection, next to the shared-detection run of
+    the same pair."""
+    out = {"shared": shared_record}
+    for name, option in ABLATIONS.items():
+        out[name] = run_matcher(Matcher(make_config("slime", device=device, **option, **options)), pair)
+        out[f"{name}_over_shared_time"] = round(out[name]["wall_s"] / max(shared_record["wall_s"], 1e-9), 2)
+    _print_ablation(label, out)
     return out
 
 
@@ -223,13 +229,14 @@ def _print_comparison(name: str, out: dict) -> None:
     print(f"Slime / Hz+ time: {out['slime_over_base_time']:.1f}x")
 
 
-def _print_ablation(out: dict) -> None:
-    print("\n== ablation, weight-free Slime 640x480: shared vs per-block detection")
-    for key in ("shared", "per_block"):
+def _print_ablation(label: str, out: dict) -> None:
+    print(f"\n== ablation, Slime {label} 640x480: shared vs per-block and per-tile detection")
+    for key in ("shared", *ABLATIONS):
         r = out[key]
         print(f"{key:9s} {r['wall_s']:8.2f} s  features {r['seconds'].get('features', 0):.2f} s, "
               f"block_pairs {r['seconds'].get('block_pairs', 0):.2f} s; {_quality_line(r)}")
-    print(f"per-block / shared time: {out['per_block_over_shared_time']:.2f}x")
+    for key in ABLATIONS:
+        print(f"{key} / shared time: {out[f'{key}_over_shared_time']:.2f}x")
 
 
 # ---------------------------------------------------------------------------------------------- main
@@ -243,7 +250,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--skip-large", action="store_true", help="skip the 1200x900 run")
     parser.add_argument("--skip-fast", action="store_true", help="skip the slime-fast (block scales 1, 2) runs")
     parser.add_argument("--skip-ablation", action="store_true",
-                        help="skip the per-block detection ablation (minutes on a CPU)")
+                        help="skip the per-block and per-tile detection ablation (minutes on a CPU)")
     args = parser.parse_args(argv)
     if args.device == "cuda" and not torch.cuda.is_available():
         raise SystemExit("--device cuda: no CUDA device available")
@@ -284,8 +291,10 @@ def main(argv: list[str] | None = None) -> dict:
                 f"Slime fast (block scales 1, 2) {label} 640x480", options, pairs["640x480"], args.device,
                 TARGETS_S[key], preset="slime-fast")
     if not args.skip_ablation:
-        runs["ablation shared vs per-block detection, weight-free 640x480"] = bench_ablation(
-            pairs["640x480"], args.device, weight_free["slime"])
+        for label, options, shared in ((learned, {"descriptor": args.descriptor}, runs[f"{learned} 640x480"]),
+                                       ("weight-free", WEIGHT_FREE, weight_free)):
+            runs[f"ablation shared vs per-block and per-tile detection, {label} 640x480"] = bench_ablation(
+                label, options, pairs["640x480"], args.device, shared["slime"])
     print()
     runs["opencv_sift"] = bench_opencv_sift(pairs)
     report["meta"]["load_average_end"] = [round(x, 2) for x in os.getloadavg()]

@@ -2,7 +2,7 @@
 next to the base Hz+ and to a bound from detection alone.
 
     python benchmarks/stage_coverage.py graf hpatches [--rotations 90,180] [--descriptor tfeat]
-        [--out results/stage_coverage.json]
+        [--slime-options shared_detection=false,...] [--out results/stage_coverage.json]
 
 Per pair (raw matches, correct = two-sided error < 15 px, the paper's coverage: min of the two images):
 - ``repeatable``: HarrisZ+ keypoints of the whole image whose ground-truth partner has a detected keypoint
@@ -28,6 +28,7 @@ from scipy.spatial import cKDTree
 
 from slime_match.config import make_config
 from slime_match.eval.datasets import load_dataset, protocol_resize, rotated_pair, to_original
+from slime_match.eval.methods import parse_method_spec
 from slime_match.eval.metrics import correct_matches_homography, coverage, valid_area_homography
 from slime_match.features.harrisz import detect_harrisz
 from slime_match.geometry.homography import project
@@ -103,9 +104,13 @@ def main() -> None:
     parser.add_argument("datasets", nargs="+", help="planar datasets: graf, hpatches, planar:<dir>, ...")
     parser.add_argument("--rotations", default="", help="rotated variants to add, degrees, e.g. 90,180")
     parser.add_argument("--descriptor", default="tfeat", help="descriptor of Hz+ and of Slime's base")
+    parser.add_argument("--slime-options", default="",
+                        help="make_config overrides for Slime only, as in a `slime bench` method spec, e.g. "
+                             "shared_detection=false,shared_tile_detection=false")
     parser.add_argument("--out", type=Path, default=Path("results/stage_coverage.json"))
     args = parser.parse_args()
-    slime_config = make_config("slime", descriptor=args.descriptor)
+    slime_options = parse_method_spec(f"slime:{args.slime_options}")[1]
+    slime_config = make_config("slime", descriptor=args.descriptor, **slime_options)
     slime_config.slime.keep_stages = True
     slime, base = Matcher(slime_config), Matcher(make_config("hz+", descriptor=args.descriptor))
     angles = [float(a) for a in args.rotations.split(",") if a.strip()]
@@ -127,7 +132,8 @@ def main() -> None:
     for k, v in mean.items():
         print(f"  {k:14s} {v['coverage']:.3f} / {v['precision']:.3f}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"descriptor": args.descriptor, "pairs": rows, "mean": mean}, indent=1))
+    args.out.write_text(json.dumps({"descriptor": args.descriptor, "slime_options": slime_options,
+                                    "pairs": rows, "mean": mean}, indent=1))
     print(f"written {args.out}")
 
 

@@ -79,6 +79,13 @@ def test_slime_stages_and_viz(pair, tmp_path, capsys):
         f"{s}.png" for s in ("blocks", "tiles", "planes", "superset", "fbar", "ftheta", "tile_matches", "final")}
 
 
+def test_slime_per_block_detection(pair, tmp_path, capsys):
+    code, _, err = _run(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--per-block", "--no-plot")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["config"]["slime"]["shared_detection"] is False and summary["counts"]["matches"] > 0
+
+
 def test_blank_image_gives_explicit_empty_result(pair, tmp_path, capsys):
     blank = tmp_path / "blank.png"
     cv2.imwrite(str(blank), np.full((200, 300, 3), 128, np.uint8))
