@@ -190,7 +190,7 @@ class HzPlusPipeline(BasePipeline):
 
     def describe(self) -> dict[str, Any]:
         return {"base": "hz+", "detector": "harrisz+", **dataclasses.asdict(self.harrisz),
-                **{k: str(v) if k == "weights_dir" else v for k, v in dataclasses.asdict(self.patch).items()},
+                **self.patch.summary(),
                 "matcher": "blob+dtm" if self.config.use_dtm else "blob"}
 
 
@@ -305,9 +305,9 @@ class KeyNetPipeline(BasePipeline):
     same stages as Hz+, on a pyramid blurred like kornia's (``KORNIA_PYRDOWN_SIGMA``). Against kornia's own
     modules: features about 2x faster, 0.6-2.3% fewer correct matches on graf 1->2..1->4 (TFeat; 2-5% fewer
     with the default anti-aliased pyramid). Only filled detections are kept (kornia pads to
-    ``max_keypoints`` with zero frames). AdaLAM scores are its inverse local-RANSAC confidences. A ``candidate_filter`` (Slime's tile refinement)
-    is applied to AdaLAM's output: AdaLAM starts from every keypoint's nearest neighbour, so it cannot take
-    a pre-filtered candidate list.
+    ``max_keypoints`` with zero frames). AdaLAM scores are its inverse local-RANSAC confidences. A
+    ``candidate_filter`` (Slime's tile refinement) is applied to AdaLAM's output: AdaLAM starts from every
+    keypoint's nearest neighbour, so it cannot take a pre-filtered candidate list.
     """
 
     name = "keynet"
@@ -381,7 +381,7 @@ class KeyNetPipeline(BasePipeline):
 
     def describe(self) -> dict[str, Any]:
         return {"base": "keynet", "detector": "keynet", "max_keypoints": self.config.max_keypoints,
-                **{k: str(v) if k == "weights_dir" else v for k, v in dataclasses.asdict(self.patch).items()},
+                **self.patch.summary(),
                 "matcher": "adalam"}
 
 

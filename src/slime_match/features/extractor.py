@@ -23,7 +23,7 @@ large supports; non-planar scenes may prefer less (3-4).
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from functools import cache
 from pathlib import Path
 
@@ -70,6 +70,10 @@ class PatchConfig:
     def from_dict(cls, options: dict) -> PatchConfig:
         """Config from a dict; unknown keys raise :class:`ConfigError`."""
         return config_from_dict(cls, options)
+
+    def summary(self) -> dict:
+        """The fields as JSON-ready values (``weights_dir`` as text), for an output summary."""
+        return {k: str(v) if k == "weights_dir" else v for k, v in asdict(self).items()}
 
 
 class LocalFeatureExtractor:
