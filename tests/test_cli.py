@@ -86,7 +86,7 @@ def test_slime_per_block_detection(pair, tmp_path, capsys):
     assert summary["config"]["slime"]["shared_detection"] is False and summary["counts"]["matches"] > 0
 
 
-def test_blank_image_gives_explicit_empty_result(pair, tmp_path, capsys):
+def test_blank_image_gives_explicit_empty_result(pair, tmp_path, capsys, caplog):
     blank = tmp_path / "blank.png"
     cv2.imwrite(str(blank), np.full((200, 300, 3), 128, np.uint8))
     for method in (["--method", "rootsift"], ["--method", "hz+", *WEIGHT_FREE], WEIGHT_FREE):
@@ -95,7 +95,12 @@ def test_blank_image_gives_explicit_empty_result(pair, tmp_path, capsys):
         assert code == 0, err
         data = np.load(out_dir / "matches.npz")
         assert data["keypoints0"].shape == (0, 2) and data["scores"].shape == (0,)
-        assert json.loads((out_dir / "summary.json").read_text())["counts"]["matches"] == 0
+        summary = json.loads((out_dir / "summary.json").read_text())
+        assert summary["counts"]["matches"] == 0
+        for warning in summary["warnings"]:  # logged once (to stderr) as it happens, not repeated at the end
+            assert caplog.text.count(warning) == 1 and warning not in err
+        caplog.clear()
+    assert "Slime found no match" in summary["warnings"][0]  # the default method says why it is empty
 
 
 def test_identical_images_match_in_place(pair, tmp_path, capsys):

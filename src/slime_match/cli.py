@@ -103,8 +103,6 @@ def _report(result, out: Path) -> None:
     if "inliers" in counts:
         line += f", {counts['inliers']} inliers ({result.geometry_kind})"
     print(f"{line} in {result.summary['seconds']['total']:.2f} s -> {out}/matches.npz")
-    for warning in result.summary.get("warnings", []):
-        print(f"warning: {warning}", file=sys.stderr)
 
 
 def cmd_match(args: argparse.Namespace) -> int:
