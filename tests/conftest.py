@@ -3,9 +3,11 @@
 import os
 from pathlib import Path
 
+import cv2
 import pytest
 import torch
 import torch.nn.functional as F
+from skimage.data import stereo_motorcycle
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = (ROOT.parent / "shared").resolve()
@@ -26,6 +28,19 @@ def require(path: Path) -> Path:
 @pytest.fixture
 def data_dir() -> Path:
     return require(DATA)
+
+
+@pytest.fixture(scope="session")
+def pair(tmp_path_factory):
+    """A real stereo pair (scikit-image's Middlebury motorcycle), halved for speed."""
+    folder = tmp_path_factory.mktemp("pair")
+    left, right, _ = stereo_motorcycle()
+    paths = []
+    for name, image in (("left.png", left), ("right.png", right)):
+        small = cv2.resize(image, (370, 250), interpolation=cv2.INTER_AREA)
+        cv2.imwrite(str(folder / name), small[:, :, ::-1])
+        paths.append(str(folder / name))
+    return paths
 
 
 def random_patches(n: int, seed: int = 0) -> torch.Tensor:

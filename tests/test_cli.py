@@ -5,24 +5,10 @@ import json
 import cv2
 import numpy as np
 import pytest
-from skimage.data import stereo_motorcycle
 
 from slime_match.cli import main
 
 WEIGHT_FREE = ["--shape", "baumberg", "--orientation", "gradient", "--descriptor", "rootsift"]
-
-
-@pytest.fixture(scope="module")
-def pair(tmp_path_factory):
-    """A real stereo pair (scikit-image's Middlebury motorcycle), halved for speed."""
-    folder = tmp_path_factory.mktemp("pair")
-    left, right, _ = stereo_motorcycle()
-    paths = []
-    for name, image in (("left.png", left), ("right.png", right)):
-        small = cv2.resize(image, (370, 250), interpolation=cv2.INTER_AREA)
-        cv2.imwrite(str(folder / name), small[:, :, ::-1])
-        paths.append(str(folder / name))
-    return paths
 
 
 def _run(capsys, *argv):

@@ -1,13 +1,11 @@
-"""Command line: ``slime match``, ``slime viz`` (and ``slime bench`` from slime_match.eval)."""
+"""Command line: ``slime match``, ``slime pairs``, ``slime demo``, ``slime viz`` (and ``slime bench``
+from slime_match.eval)."""
 
 from __future__ import annotations
 
 import argparse
 import logging
-import os
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 from .errors import SlimeMatchError
@@ -74,29 +72,6 @@ def _config(args: argparse.Namespace):
     return config
 
 
-def _write_outputs(result, image0, image1, out: Path, plot: bool = True) -> None:
-    """matches.npz, summary.json, matches.png (and stages.npz) into ``out``, all or nothing.
-
-    ``image0`` / ``image1`` are the loaded (H, W, 3) float images (for the picture).
-    """
-    from .io import save_json, save_npz
-    from .viz import plot_matches
-
-    out.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(dir=out, prefix=".staging-"))
-    try:
-        save_npz(staging / "matches.npz", **result.arrays())
-        save_json(staging / "summary.json", result.summary)
-        if plot:
-            plot_matches(image0, image1, result, staging / "matches.png")
-        if result.stages is not None:
-            save_npz(staging / "stages.npz", **result.stages)
-        for item in staging.iterdir():
-            os.replace(item, out / item.name)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-
-
 def _report(result, out: Path) -> None:
     counts = result.summary["counts"]
     line = f"{counts['matches']} matches"
@@ -108,14 +83,27 @@ def _report(result, out: Path) -> None:
 def cmd_match(args: argparse.Namespace) -> int:
     from .io import load_image
     from .matcher import Matcher
+    from .outputs import write_pair_outputs
 
     config = _config(args)
     image0, image1 = load_image(args.image0), load_image(args.image1)  # bad input fails before model loading
     result = Matcher(config)(image0, image1)
     out = Path(args.output)
-    _write_outputs(result, image0, image1, out, plot=not args.no_plot)
+    write_pair_outputs(result, image0, image1, out, plot=not args.no_plot)
     _report(result, out)
     return 0
+
+
+def cmd_pairs(args: argparse.Namespace) -> int:
+    from .batch import INDEX_FILE, match_pairs, read_pairs
+
+    jobs = read_pairs(args.pairs, args.images)  # a bad pairs file or a missing image fails before any work
+    records = match_pairs(_config(args), jobs, args.output, workers=args.workers, overwrite=args.overwrite,
+                          plot=args.plot)
+    count = {status: sum(r["status"] == status for r in records) for status in ("done", "skipped", "failed")}
+    print(f"{len(records)} pairs: {count['done']} matched, {count['skipped']} already done, "
+          f"{count['failed']} failed -> {Path(args.output) / INDEX_FILE}")
+    return 1 if count["failed"] else 0
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -125,6 +113,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     from .eval.metrics import disparity_error
     from .matcher import Matcher
+    from .outputs import write_pair_outputs
 
     left, right, disparity = stereo_motorcycle()
     out = Path(args.output)
@@ -142,7 +131,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         "correct_15px": int(correct.sum()),
         "precision": float(correct.sum() / max(int(known.sum()), 1)),
     }
-    _write_outputs(result, image0, image1, out)
+    write_pair_outputs(result, image0, image1, out)
     _report(result, out)
     gt = result.summary["ground_truth"]
     print(f"ground truth (disparity): {gt['correct_15px']} of {gt['matches_with_known_disparity']} matches "
@@ -180,6 +169,19 @@ def build_parser() -> argparse.ArgumentParser:
     match.add_argument("--no-plot", action="store_true", help="skip matches.png")
     _add_match_options(match)
     match.set_defaults(func=cmd_match)
+
+    pairs = sub.add_parser("pairs", help="match many pairs listed in a file (resumable, optional workers)")
+    pairs.add_argument("pairs", help="text file, one 'image0 image1' pair per line (# comments)")
+    pairs.add_argument("--images", default=".", help="folder that relative image names are resolved against "
+                                                     "(default: the current folder)")
+    pairs.add_argument("-o", "--output", required=True,
+                       help="run folder: one sub-folder per pair, pairs.json (index), run.json (configuration)")
+    pairs.add_argument("--workers", type=int, default=1,
+                       help="processes matching pairs at once, sharing the CPU threads (default 1)")
+    pairs.add_argument("--overwrite", action="store_true", help="recompute the pairs already done in the folder")
+    pairs.add_argument("--plot", action="store_true", help="also draw each pair's matches.png")
+    _add_match_options(pairs)
+    pairs.set_defaults(func=cmd_pairs)
 
     demo = sub.add_parser("demo", help="match a bundled real stereo pair (Middlebury motorcycle) and score it")
     demo.add_argument("-o", "--output", default="slime_demo", help="output folder (default slime_demo/)")

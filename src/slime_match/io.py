@@ -144,6 +144,11 @@ def save_figure(path: str | os.PathLike, figure) -> None:
     _atomic_write(Path(path), lambda tmp: figure.savefig(tmp, format=suffix, dpi=110, bbox_inches="tight"))
 
 
+def jsonable(obj: Any) -> Any:
+    """``obj`` as it reads back from :func:`save_json` (tuples as lists, numpy values and paths converted)."""
+    return json.loads(json.dumps(obj, default=_json_default))
+
+
 def _json_default(value: Any) -> Any:
     if isinstance(value, np.generic):
         return value.item()

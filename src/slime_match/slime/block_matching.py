@@ -16,6 +16,7 @@ import itertools
 import logging
 import math
 import multiprocessing
+import signal
 from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -307,7 +308,9 @@ def fork_map(fn: Callable[[int], Any], count: int, workers: int, chunks: int) ->
     edges = np.linspace(0, count, min(chunks, count) + 1).astype(int)
     _FORK_TASK = fn
     try:
-        with multiprocessing.get_context("fork").Pool(min(workers, count)) as pool:
+        # Ctrl-C is the parent's to handle: leaving the block terminates the children
+        with multiprocessing.get_context("fork").Pool(min(workers, count), initializer=signal.signal,
+                                                      initargs=(signal.SIGINT, signal.SIG_IGN)) as pool:
             parts = pool.map(_run_chunk, list(itertools.pairwise(edges)), chunksize=1)
     finally:
         _FORK_TASK = None

@@ -1,0 +1,273 @@
+"""Many pairs in one run (``slime pairs``): a pairs file in, one output folder per pair, resumable.
+
+A pairs file lists one pair per line, two image names separated by spaces (the format of hloc's pairs
+files); blank lines and ``#`` comments are ignored, and relative names are resolved against an image folder.
+Every pair gets the folder ``OUT/<name0>__<name1>/`` (``/`` in names becomes ``-``) with the files of
+``slime match``; ``OUT/pairs.json`` indexes them and ``OUT/run.json`` records the configuration, so that a
+rerun skips the finished pairs and refuses to mix configurations.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import logging
+import os
+import signal
+import sys
+import time
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from .config import MatchConfig
+from .errors import ConfigError, ImageError
+from .io import jsonable, load_image, save_json
+from .outputs import SUMMARY_FILE, is_complete, write_pair_outputs
+
+logger = logging.getLogger("slime_match")
+
+INDEX_FILE = "pairs.json"
+RUN_FILE = "run.json"
+
+
+@dataclass(frozen=True)
+class PairJob:
+    """One line of a pairs file.
+
+    Attributes:
+        name0, name1: the image names as written in the pairs file.
+        path0, path1: the resolved image paths.
+        folder: the pair's output folder name (relative to the run folder).
+    """
+
+    name0: str
+    name1: str
+    path0: Path
+    path1: Path
+    folder: str
+
+
+def read_pairs(pairs_file: str | os.PathLike, image_dir: str | os.PathLike = ".") -> list[PairJob]:
+    """Parse a pairs file and check that every image it names exists.
+
+    Args:
+        pairs_file: text file, one ``name0 name1`` pair per line.
+        image_dir: folder that relative names are resolved against.
+
+    Returns:
+        The pairs in file order, repeated pairs once.
+
+    Raises:
+        ConfigError: unreadable file, a line without exactly two names, no pair, two pairs sharing a folder.
+        ImageError: listed images that do not exist (all of them named, up to five).
+    """
+    path = Path(pairs_file)
+    try:
+        lines = path.read_text().splitlines()
+    except (OSError, UnicodeDecodeError) as error:
+        raise ConfigError(f"cannot read the pairs file {path}: {error}") from None
+    jobs: dict[tuple[str, str], PairJob] = {}
+    folders: dict[str, tuple[str, str]] = {}
+    for number, line in enumerate(lines, 1):
+        fields = line.split("#", 1)[0].split()
+        if not fields:
+            continue
+        if len(fields) != 2:
+            raise ConfigError(f"{path}:{number}: expected two image names, got {len(fields)}: {line.strip()!r}")
+        key = (fields[0], fields[1])
+        if key in jobs:
+            continue
+        folder = f"{_slug(fields[0])}__{_slug(fields[1])}"
+        if folders.setdefault(folder, key) != key:
+            raise ConfigError(f"{path}:{number}: pairs {folders[folder]} and {key} would share the output "
+                              f"folder {folder!r}; rename one of the images")
+        jobs[key] = PairJob(fields[0], fields[1], Path(image_dir) / fields[0], Path(image_dir) / fields[1], folder)
+    if not jobs:
+        raise ConfigError(f"{path} lists no pair (one 'image0 image1' per line)")
+    missing = sorted({str(p) for job in jobs.values() for p in (job.path0, job.path1) if not p.is_file()})
+    if missing:
+        shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
+        raise ImageError(f"{len(missing)} image(s) listed in {path} not found (image folder {image_dir}): {shown}")
+    return list(jobs.values())
+
+
+def _slug(name: str) -> str:
+    return name.replace("\\", "/").strip("/").replace("/", "-")
+
+
+def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathLike, workers: int = 1,
+                overwrite: bool = False, plot: bool = False) -> list[dict[str, Any]]:
+    """Match every pair into ``output/<folder>/``, skipping the pairs already finished there.
+
+    Args:
+        config: the matcher configuration (the same for every pair).
+        jobs: pairs from :func:`read_pairs`.
+        output: the run folder.
+        workers: processes matching pairs at once; the CPU threads are split among them.
+        overwrite: recompute finished pairs (and accept a run folder made with another configuration).
+        plot: also draw each pair's matches.png.
+
+    Returns:
+        One record per pair, in ``jobs`` order: names, folder, status ("done", "skipped" or "failed"),
+        matches, seconds and, for failures, the error. The same list is written to ``output/pairs.json``.
+
+    Raises:
+        ConfigError: ``workers`` < 1, or ``output`` holds a run with another configuration.
+    """
+    from .matcher import Matcher
+
+    if workers < 1:
+        raise ConfigError(f"workers must be >= 1, got {workers}")
+    out = Path(output)
+    matcher = Matcher(config)  # resolves "auto" choices and fails early on missing weights or a missing GPU
+    _claim_run_folder(out, matcher.config, overwrite)
+    records: dict[int, dict[str, Any]] = {}
+    todo = []
+    for index, job in enumerate(jobs):
+        if not overwrite and is_complete(out / job.folder):
+            records[index] = _record(job, "skipped", **_finished_counts(out / job.folder))
+        else:
+            todo.append(index)
+    progress = tqdm(total=len(jobs), initial=len(records), desc="pairs", unit="pair", file=sys.stderr,
+                    disable=None)
+    try:
+        if workers == 1 or len(todo) <= 1:
+            for index in todo:
+                records[index] = _match_one(matcher, jobs[index], out, plot)
+                _advance(progress, records[index])
+        else:
+            _run_in_pool(matcher, jobs, todo, out, plot, workers, records, progress)
+    finally:
+        progress.close()
+        ordered = [records[i] for i in sorted(records)]
+        save_json(out / INDEX_FILE, {"pairs": ordered, "finished": len(records) == len(jobs)})
+    return ordered
+
+
+def _claim_run_folder(out: Path, config: MatchConfig, overwrite: bool) -> None:
+    """Record the configuration in ``out/run.json``; refuse to resume a run made with another one."""
+    current = jsonable(config.to_dict())
+    run_file = out / RUN_FILE
+    if run_file.is_file() and not overwrite:
+        previous = json.loads(run_file.read_text()).get("config")
+        if previous != current:
+            changed = sorted(_differences(previous or {}, current))
+            raise ConfigError(f"{out} holds a run made with another configuration (differs in: "
+                              f"{', '.join(changed) or 'everything'}): use another output folder or --overwrite")
+        return
+    from . import __version__
+
+    save_json(run_file, {"slime_match_version": __version__, "config": current})
+
+
+def _differences(a: dict, b: dict, prefix: str = "") -> list[str]:
+    """Dotted keys whose values differ between two nested dicts."""
+    keys = []
+    for key in sorted(set(a) | set(b)):
+        va, vb = a.get(key), b.get(key)
+        if isinstance(va, dict) and isinstance(vb, dict):
+            keys += _differences(va, vb, f"{prefix}{key}.")
+        elif va != vb:
+            keys.append(prefix + key)
+    return keys
+
+
+def _record(job: PairJob, status: str, matches: int | None = None, seconds: float | None = None,
+            error: str | None = None) -> dict[str, Any]:
+    record = {"image0": job.name0, "image1": job.name1, "folder": job.folder, "status": status,
+              "matches": matches, "seconds": seconds}
+    if error is not None:
+        record["error"] = error
+    return record
+
+
+def _finished_counts(folder: Path) -> dict[str, Any]:
+    summary = json.loads((folder / SUMMARY_FILE).read_text())
+    return {"matches": summary["counts"]["matches"], "seconds": summary["seconds"]["total"]}
+
+
+def _match_one(matcher, job: PairJob, out: Path, plot: bool) -> dict[str, Any]:
+    """Match one pair and write its folder; a failure (bad image, bug) is recorded, not raised."""
+    start = time.perf_counter()
+    try:
+        image0, image1 = load_image(job.path0), load_image(job.path1)
+        result = matcher(image0, image1)
+        write_pair_outputs(result, image0, image1, out / job.folder, plot=plot)
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except ImageError as error:
+        return _record(job, "failed", seconds=round(time.perf_counter() - start, 4), error=str(error))
+    except Exception as error:  # one pair must not end a long run; the record says what happened
+        if _interrupted(error):  # numba re-raises a Ctrl-C inside compiled code as a SystemError
+            raise KeyboardInterrupt from error
+        logger.exception("pair %s %s failed", job.name0, job.name1)
+        return _record(job, "failed", seconds=round(time.perf_counter() - start, 4),
+                       error=f"{type(error).__name__}: {error}")
+    return _record(job, "done", len(result), result.summary["seconds"]["total"])
+
+
+def _interrupted(error: BaseException) -> bool:
+    """Whether a KeyboardInterrupt is among the causes of ``error``."""
+    seen = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, KeyboardInterrupt):
+            return True
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return False
+
+
+def _advance(progress: tqdm, record: dict[str, Any]) -> None:
+    if record["status"] == "failed":
+        logger.warning("%s %s: %s", record["image0"], record["image1"], record["error"])
+    progress.set_postfix_str(f"{record['image0']} {record['image1']}: {record['matches'] or 0} matches")
+    progress.update()
+
+
+def _run_in_pool(matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool, workers: int,
+                 records: dict[int, dict[str, Any]], progress: tqdm) -> None:
+    """Match the ``todo`` pairs in ``workers`` spawned processes, each with a Matcher of ``matcher``'s
+    configuration and an equal share of the CPU cores (torch threads and, on CPU, Slime's own forked
+    workers); records are filled in as pairs finish. On an interruption the workers are stopped at once (a
+    pair's files are written all or nothing)."""
+    share = max(1, (os.cpu_count() or 1) // workers)
+    config = copy.deepcopy(matcher.config)
+    if config.slime.workers is None and matcher.device.type == "cpu":  # CUDA work stays unforked
+        config.slime.workers = share
+    tasks = [(index, jobs[index], out, plot) for index in todo]
+    pool = get_context("spawn").Pool(workers, initializer=_init_worker, initargs=(config, share))
+    try:  # spawn, not fork: a forked copy of the parent's torch and OpenMP thread pools can deadlock
+        for index, record in pool.imap_unordered(_match_in_worker, tasks):
+            records[index] = record
+            _advance(progress, record)
+        pool.close()
+    except BaseException:
+        pool.terminate()
+        raise
+    finally:
+        pool.join()
+
+
+_WORKER_MATCHER = None
+
+
+def _init_worker(config: MatchConfig, threads: int) -> None:
+    import numba
+    import torch
+
+    from .matcher import Matcher
+
+    global _WORKER_MATCHER
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle: it stops the workers
+    torch.set_num_threads(threads)
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    _WORKER_MATCHER = Matcher(config)
+
+
+def _match_in_worker(task: tuple[int, PairJob, Path, bool]) -> tuple[int, dict[str, Any]]:
+    index, job, out, plot = task
+    return index, _match_one(_WORKER_MATCHER, job, out, plot)

@@ -1,0 +1,133 @@
+"""``slime pairs``: pairs files, one folder per pair, resuming, failures recorded, workers."""
+
+import json
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+from slime_match.batch import _interrupted, read_pairs
+from slime_match.cli import main
+from slime_match.errors import ConfigError, ImageError
+
+FAST = ["--method", "rootsift"]  # the base RootSIFT alone: the run logic, not the matcher, is under test
+SLIME_SMALL = ["--shape", "baumberg", "--orientation", "gradient", "--descriptor", "rootsift", "--scales", "1"]
+
+
+@pytest.fixture
+def images(pair, tmp_path):
+    """A folder with the stereo pair (left.png, right.png), a copy in a sub-folder and a corrupt image."""
+    folder = tmp_path / "images"
+    (folder / "sub").mkdir(parents=True)
+    shutil.copy(pair[0], folder / "left.png")
+    shutil.copy(pair[1], folder / "right.png")
+    shutil.copy(pair[1], folder / "sub" / "right.png")
+    (folder / "broken.png").write_bytes(b"\x89PNG not really")
+    return folder
+
+
+def _pairs_file(tmp_path, text):
+    path = tmp_path / "pairs.txt"
+    path.write_text(text)
+    return path
+
+
+def _run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_read_pairs_format(images, tmp_path):
+    text = "# stereo\nleft.png right.png\n\nleft.png sub/right.png  # the copy\nleft.png right.png\n"
+    jobs = read_pairs(_pairs_file(tmp_path, text), images)
+    assert [(j.name0, j.name1) for j in jobs] == [("left.png", "right.png"), ("left.png", "sub/right.png")]
+    assert [j.folder for j in jobs] == ["left.png__right.png", "left.png__sub-right.png"]
+    assert jobs[1].path1 == images / "sub" / "right.png"
+
+
+@pytest.mark.parametrize("text, error, words", [
+    ("left.png right.png\nleft.png\n", ConfigError, "pairs.txt:2: expected two image names, got 1"),
+    ("# nothing\n\n", ConfigError, "lists no pair"),
+    ("left.png right.png\nleft.png gone.png\nx.png left.png\n", ImageError, "2 image(s)"),
+    ("left.png sub/right.png\nleft.png sub-right.png\n", ConfigError, "share the output folder"),
+])
+def test_read_pairs_errors(images, tmp_path, text, error, words):
+    (images / "sub-right.png").write_bytes(b"")  # exists, so that only the folder clash is reported
+    with pytest.raises(error) as info:
+        read_pairs(_pairs_file(tmp_path, text), images)
+    assert words in str(info.value)
+    with pytest.raises(ConfigError, match="cannot read the pairs file"):
+        read_pairs(tmp_path / "absent.txt", images)
+
+
+def test_interrupted_sees_the_cause_chain():
+    try:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as inner:
+            raise SystemError("wrapped by a compiled function") from inner
+    except SystemError as error:
+        assert _interrupted(error)
+    assert not _interrupted(ValueError("plain"))
+
+
+def test_pairs_run_resume_failures_and_config_guard(images, tmp_path, capsys):
+    pairs = _pairs_file(tmp_path, "left.png right.png\nright.png left.png\nleft.png broken.png\n")
+    out = tmp_path / "run"
+    code, stdout, err = _run(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST)
+    assert code == 1 and "3 pairs: 2 matched, 0 already done, 1 failed" in stdout, err
+    index = json.loads((out / "pairs.json").read_text())
+    assert index["finished"] and [r["status"] for r in index["pairs"]] == ["done", "done", "failed"]
+    assert "broken.png" in index["pairs"][2]["error"] and not (out / "left.png__broken.png").exists()
+    for record in index["pairs"][:2]:
+        data = np.load(out / record["folder"] / "matches.npz")
+        summary = json.loads((out / record["folder"] / "summary.json").read_text())
+        assert len(data["scores"]) == record["matches"] == summary["counts"]["matches"] > 100
+    assert not (out / "left.png__right.png" / "matches.png").exists()  # plots are opt-in (--plot)
+    assert json.loads((out / "run.json").read_text())["config"]["method"] == "rootsift"
+
+    stamp = (out / "left.png__right.png" / "matches.npz").stat().st_mtime_ns
+    code, stdout, _ = _run(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST)
+    assert code == 1 and "0 matched, 2 already done, 1 failed" in stdout
+    assert (out / "left.png__right.png" / "matches.npz").stat().st_mtime_ns == stamp
+
+    code, _, err = _run(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST, "--upright")
+    assert code == 2 and "another configuration" in err and "base.upright" in err
+
+    good = _pairs_file(tmp_path, "left.png right.png\n")
+    code, stdout, _ = _run(capsys, "pairs", good, "--images", images, "-o", out, *FAST, "--upright",
+                           "--overwrite", "--plot")
+    assert code == 0 and "1 matched, 0 already done, 0 failed" in stdout
+    assert (out / "left.png__right.png" / "matches.png").is_file()
+    assert json.loads((out / "run.json").read_text())["config"]["base"]["upright"] is True
+
+
+def test_pairs_bad_input_fails_before_any_work(images, tmp_path, capsys):
+    out = tmp_path / "run"
+    pairs = _pairs_file(tmp_path, "left.png right.png\nleft.png missing.png\n")
+    code, _, err = _run(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST)
+    assert code == 2 and "missing.png" in err and not out.exists()
+    good = _pairs_file(tmp_path, "left.png right.png\n")
+    code, _, err = _run(capsys, "pairs", good, "--images", images, "-o", out, *FAST, "--workers", "0")
+    assert code == 2 and "workers must be >= 1" in err and not out.exists()
+
+
+def test_pairs_workers_give_the_same_matches(images, tmp_path, capsys):
+    """Slime (weight-free, one block scale for speed) in two spawned workers, each with its share of the
+    cores, gives the matches of one process."""
+    pairs = _pairs_file(tmp_path, "left.png right.png\nright.png left.png\nleft.png sub/right.png\n")
+    runs = {}
+    for workers in (1, 2):
+        out = tmp_path / f"run{workers}"
+        code, _, err = _run(capsys, "pairs", pairs, "--images", images, "-o", out, *SLIME_SMALL,
+                            "--workers", workers)
+        assert code == 0, err
+        runs[workers] = out
+    for folder in ("left.png__right.png", "right.png__left.png", "left.png__sub-right.png"):
+        a, b = (np.load(runs[w] / folder / "matches.npz") for w in (1, 2))
+        assert len(a["scores"]) > 100 and np.array_equal(a["keypoints0"], b["keypoints0"])
+        assert np.array_equal(a["keypoints1"], b["keypoints1"])
+    summary = json.loads((runs[2] / "left.png__right.png" / "summary.json").read_text())
+    assert summary["config"]["slime"]["workers"] == max(1, (os.cpu_count() or 1) // 2)  # no oversubscription
