@@ -197,8 +197,6 @@ def _match_one(matcher, job: PairJob, out: Path, plot: bool) -> dict[str, Any]:
         image0, image1 = load_image(job.path0), load_image(job.path1)
         result = matcher(image0, image1)
         write_pair_outputs(result, image0, image1, out / job.folder, plot=plot)
-    except (KeyboardInterrupt, SystemExit):
-        raise
     except ImageError as error:
         return _record(job, "failed", seconds=round(time.perf_counter() - start, 4), error=str(error))
     except Exception as error:  # one pair must not end a long run; the record says what happened
