@@ -63,7 +63,7 @@ def read_pairs(pairs_file: str | os.PathLike, image_dir: str | os.PathLike = "."
 
     Raises:
         ConfigError: unreadable file, a line without exactly two names, no pair, two pairs sharing a folder.
-        ImageError: listed images that do not exist (all of them named, up to five).
+        ImageError: listed images that do not exist (their count, and the first five named).
     """
     path = Path(pairs_file)
     try:
