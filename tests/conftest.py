@@ -9,6 +9,8 @@ import torch
 import torch.nn.functional as F
 from skimage.data import stereo_motorcycle
 
+from slime_match.cli import main
+
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = (ROOT.parent / "shared").resolve()
 DATA = SHARED / "data"
@@ -41,6 +43,13 @@ def pair(tmp_path_factory):
         cv2.imwrite(str(folder / name), small[:, :, ::-1])
         paths.append(str(folder / name))
     return paths
+
+
+def run_cli(capsys, *argv) -> tuple[int, str, str]:
+    """Run the ``slime`` command line in-process: (exit code, stdout, stderr)."""
+    code = main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
 
 
 def random_patches(n: int, seed: int = 0) -> torch.Tensor:

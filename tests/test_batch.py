@@ -6,9 +6,9 @@ import shutil
 
 import numpy as np
 import pytest
+from conftest import run_cli
 
 from slime_match.batch import _interrupted, read_pairs
-from slime_match.cli import main
 from slime_match.errors import ConfigError, ImageError
 
 FAST = ["--method", "rootsift"]  # the base RootSIFT alone: the run logic, not the matcher, is under test
@@ -31,12 +31,6 @@ def _pairs_file(tmp_path, text):
     path = tmp_path / "pairs.txt"
     path.write_text(text)
     return path
-
-
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def test_read_pairs_format(images, tmp_path):
@@ -76,7 +70,7 @@ def test_interrupted_sees_the_cause_chain():
 def test_pairs_run_resume_failures_and_config_guard(images, tmp_path, capsys):
     pairs = _pairs_file(tmp_path, "left.png right.png\nright.png left.png\nleft.png broken.png\n")
     out = tmp_path / "run"
-    code, stdout, err = _run(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST)
+    code, stdout, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST)
     assert code == 1 and "3 pairs: 2 matched, 0 already done, 1 failed" in stdout, err
     index = json.loads((out / "pairs.json").read_text())
     assert index["finished"] and [r["status"] for r in index["pairs"]] == ["done", "done", "failed"]
@@ -89,15 +83,15 @@ def test_pairs_run_resume_failures_and_config_guard(images, tmp_path, capsys):
     assert json.loads((out / "run.json").read_text())["config"]["method"] == "rootsift"
 
     stamp = (out / "left.png__right.png" / "matches.npz").stat().st_mtime_ns
-    code, stdout, _ = _run(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST)
+    code, stdout, _ = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST)
     assert code == 1 and "0 matched, 2 already done, 1 failed" in stdout
     assert (out / "left.png__right.png" / "matches.npz").stat().st_mtime_ns == stamp
 
-    code, _, err = _run(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST, "--upright")
+    code, _, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST, "--upright")
     assert code == 2 and "another configuration" in err and "base.upright" in err
 
     good = _pairs_file(tmp_path, "left.png right.png\n")
-    code, stdout, _ = _run(capsys, "pairs", good, "--images", images, "-o", out, *FAST, "--upright",
+    code, stdout, _ = run_cli(capsys, "pairs", good, "--images", images, "-o", out, *FAST, "--upright",
                            "--overwrite", "--plot")
     assert code == 0 and "1 matched, 0 already done, 0 failed" in stdout
     assert (out / "left.png__right.png" / "matches.png").is_file()
@@ -107,10 +101,10 @@ def test_pairs_run_resume_failures_and_config_guard(images, tmp_path, capsys):
 def test_pairs_bad_input_fails_before_any_work(images, tmp_path, capsys):
     out = tmp_path / "run"
     pairs = _pairs_file(tmp_path, "left.png right.png\nleft.png missing.png\n")
-    code, _, err = _run(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST)
+    code, _, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST)
     assert code == 2 and "missing.png" in err and not out.exists()
     good = _pairs_file(tmp_path, "left.png right.png\n")
-    code, _, err = _run(capsys, "pairs", good, "--images", images, "-o", out, *FAST, "--workers", "0")
+    code, _, err = run_cli(capsys, "pairs", good, "--images", images, "-o", out, *FAST, "--workers", "0")
     assert code == 2 and "workers must be >= 1" in err and not out.exists()
 
 
@@ -121,7 +115,7 @@ def test_pairs_workers_give_the_same_matches(images, tmp_path, capsys):
     runs = {}
     for workers in (1, 2):
         out = tmp_path / f"run{workers}"
-        code, _, err = _run(capsys, "pairs", pairs, "--images", images, "-o", out, *SLIME_SMALL,
+        code, _, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *SLIME_SMALL,
                             "--workers", workers)
         assert code == 0, err
         runs[workers] = out

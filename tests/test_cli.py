@@ -5,20 +5,15 @@ import json
 import cv2
 import numpy as np
 import pytest
+from conftest import run_cli
 
 from slime_match.cli import main
 
 WEIGHT_FREE = ["--shape", "baumberg", "--orientation", "gradient", "--descriptor", "rootsift"]
 
 
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
-
-
 def test_match_writes_all_outputs(pair, tmp_path, capsys):
-    code, out, err = _run(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift")
+    code, out, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift")
     assert code == 0, err
     assert "matches" in out
     assert sorted(p.name for p in tmp_path.iterdir()) == ["matches.npz", "matches.png", "summary.json"]
@@ -34,7 +29,7 @@ def test_match_writes_all_outputs(pair, tmp_path, capsys):
 
 @pytest.mark.parametrize("ransac, key", [("fundamental", "F"), ("homography", "H"), ("magsac-fundamental", "F")])
 def test_ransac_outputs(pair, tmp_path, capsys, ransac, key):
-    code, out, err = _run(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift", "--ransac", ransac,
+    code, out, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift", "--ransac", ransac,
                           "--threshold", "3", "--no-plot")
     assert code == 0, err
     data = np.load(tmp_path / "matches.npz")
@@ -44,7 +39,7 @@ def test_ransac_outputs(pair, tmp_path, capsys, ransac, key):
 
 
 def test_hz_plus_weight_free(pair, tmp_path, capsys):
-    code, _, err = _run(capsys, "match", *pair, "-o", tmp_path, "--method", "hz+", *WEIGHT_FREE, "--no-plot")
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--method", "hz+", *WEIGHT_FREE, "--no-plot")
     assert code == 0, err
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["pipeline"]["descriptor"] == "rootsift" and summary["pipeline"]["shape"] == "baumberg"
@@ -52,21 +47,21 @@ def test_hz_plus_weight_free(pair, tmp_path, capsys):
 
 
 def test_slime_stages_and_viz(pair, tmp_path, capsys):
-    code, _, err = _run(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--save-stages", "--no-plot")
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--save-stages", "--no-plot")
     assert code == 0, err
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["method"] == "slime" and summary["counts"]["matches"] > 0
     assert {"block_pairs", "expansion", "plane_selection", "global_dtm"} <= set(summary["seconds"])
     stages = np.load(tmp_path / "stages.npz")
     assert stages["final_xy0"].shape == (summary["counts"]["matches"], 2)
-    code, _out, err = _run(capsys, "viz", tmp_path / "stages.npz", *pair, "-o", tmp_path / "viz")
+    code, _out, err = run_cli(capsys, "viz", tmp_path / "stages.npz", *pair, "-o", tmp_path / "viz")
     assert code == 0, err
     assert {p.name for p in (tmp_path / "viz").iterdir()} == {
         f"{s}.png" for s in ("blocks", "tiles", "planes", "superset", "fbar", "ftheta", "tile_matches", "final")}
 
 
 def test_slime_per_block_detection(pair, tmp_path, capsys):
-    code, _, err = _run(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--per-block", "--no-plot")
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--per-block", "--no-plot")
     assert code == 0, err
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["config"]["slime"]["shared_detection"] is False and summary["counts"]["matches"] > 0
@@ -77,7 +72,7 @@ def test_blank_image_gives_explicit_empty_result(pair, tmp_path, capsys, caplog)
     cv2.imwrite(str(blank), np.full((200, 300, 3), 128, np.uint8))
     for method in (["--method", "rootsift"], ["--method", "hz+", *WEIGHT_FREE], WEIGHT_FREE):
         out_dir = tmp_path / "out"
-        code, _, err = _run(capsys, "match", blank, pair[0], "-o", out_dir, *method)
+        code, _, err = run_cli(capsys, "match", blank, pair[0], "-o", out_dir, *method)
         assert code == 0, err
         data = np.load(out_dir / "matches.npz")
         assert data["keypoints0"].shape == (0, 2) and data["scores"].shape == (0,)
@@ -90,7 +85,7 @@ def test_blank_image_gives_explicit_empty_result(pair, tmp_path, capsys, caplog)
 
 
 def test_identical_images_match_in_place(pair, tmp_path, capsys):
-    code, _, err = _run(capsys, "match", pair[0], pair[0], "-o", tmp_path, "--method", "rootsift", "--no-plot")
+    code, _, err = run_cli(capsys, "match", pair[0], pair[0], "-o", tmp_path, "--method", "rootsift", "--no-plot")
     assert code == 0, err
     data = np.load(tmp_path / "matches.npz")
     shift = np.linalg.norm(data["keypoints0"] - data["keypoints1"], axis=1)
@@ -103,7 +98,7 @@ def test_grey_rgba_and_16bit_inputs(pair, tmp_path, capsys):
                 "deep.png": left.astype(np.uint16) * 257}
     for name, image in variants.items():
         cv2.imwrite(str(tmp_path / name), image)
-        code, _, err = _run(capsys, "match", tmp_path / name, pair[1], "-o", tmp_path / name[:-4], "--method",
+        code, _, err = run_cli(capsys, "match", tmp_path / name, pair[1], "-o", tmp_path / name[:-4], "--method",
                             "rootsift", "--no-plot")
         assert code == 0, err
         assert len(np.load(tmp_path / name[:-4] / "matches.npz")["scores"]) > 50
@@ -116,7 +111,7 @@ def test_bad_input_one_line_error_no_output(pair, tmp_path, capsys, case):
     (tmp_path / "notes.png").write_text("not an image")
     cv2.imwrite(str(tmp_path / "tiny.png"), np.zeros((16, 16, 3), np.uint8))
     out_dir = tmp_path / "out"
-    code, _out, err = _run(capsys, "match", bad, pair[1], "-o", out_dir, "--method", "rootsift")
+    code, _out, err = run_cli(capsys, "match", bad, pair[1], "-o", out_dir, "--method", "rootsift")
     assert code == 2
     assert err.startswith("error: ") and err.count("\n") == 1 and "Traceback" not in err
     assert not out_dir.exists()
@@ -126,22 +121,22 @@ def test_bad_options_and_missing_gpu(pair, tmp_path, capsys):
     for bad in (["--descriptor", "sift2"], ["--scales", "1,x"], ["--scales", "0,2"]):
         with pytest.raises(SystemExit):
             main(["match", *pair, "-o", str(tmp_path), *bad])
-    code, _, err = _run(capsys, "match", *pair, "-o", tmp_path, "--threshold", "-1", "--method", "rootsift")
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--threshold", "-1", "--method", "rootsift")
     assert code == 2 and "threshold" in err
     import torch
 
     if not torch.cuda.is_available():
-        code, _, err = _run(capsys, "match", *pair, "-o", tmp_path, "--device", "cuda", "--method", "rootsift")
+        code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--device", "cuda", "--method", "rootsift")
         assert code == 2 and "no CUDA" in err
 
 
 def test_viz_bad_input(tmp_path, capsys, pair):
-    code, _, err = _run(capsys, "viz", tmp_path / "none.npz", *pair, "-o", tmp_path)
+    code, _, err = run_cli(capsys, "viz", tmp_path / "none.npz", *pair, "-o", tmp_path)
     assert code == 2 and "no such stages file" in err
 
 
 def test_demo_scores_the_real_pair(tmp_path, capsys):
-    code, out, err = _run(capsys, "demo", "-o", tmp_path, "--method", "rootsift")
+    code, out, err = run_cli(capsys, "demo", "-o", tmp_path, "--method", "rootsift")
     assert code == 0, err
     gt = json.loads((tmp_path / "summary.json").read_text())["ground_truth"]
     assert gt["precision"] > 0.8 and "precision" in out
