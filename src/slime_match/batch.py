@@ -16,6 +16,7 @@ import os
 import signal
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
@@ -23,9 +24,11 @@ from typing import Any
 
 from tqdm import tqdm
 
+from . import __version__
 from .config import MatchConfig
 from .errors import ConfigError, ImageError
 from .io import jsonable, load_image, save_json
+from .matcher import Matcher
 from .outputs import SUMMARY_FILE, is_complete, write_pair_outputs
 
 logger = logging.getLogger("slime_match")
@@ -118,8 +121,6 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
     Raises:
         ConfigError: ``workers`` < 1, or ``output`` holds a run with another configuration.
     """
-    from .matcher import Matcher
-
     if workers < 1:
         raise ConfigError(f"workers must be >= 1, got {workers}")
     out = Path(output)
@@ -134,14 +135,19 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
             todo.append(index)
     progress = tqdm(total=len(jobs), initial=len(records), desc="pairs", unit="pair", file=sys.stderr,
                     disable=None)
+    if workers == 1 or len(todo) <= 1:
+        finished = ((index, _match_one(matcher, jobs[index], out, plot)) for index in todo)
+    else:
+        finished = _match_in_pool(matcher, jobs, todo, out, plot, workers)
     try:
-        if workers == 1 or len(todo) <= 1:
-            for index in todo:
-                records[index] = _match_one(matcher, jobs[index], out, plot)
-                _advance(progress, records[index])
-        else:
-            _run_in_pool(matcher, jobs, todo, out, plot, workers, records, progress)
+        for index, record in finished:
+            records[index] = record
+            if record["status"] == "failed":
+                logger.warning("%s %s: %s", record["image0"], record["image1"], record["error"])
+            progress.set_postfix_str(f"{record['image0']} {record['image1']}: {record['matches'] or 0} matches")
+            progress.update()
     finally:
+        finished.close()  # stops the pool's workers when the loop ends early
         progress.close()
         ordered = [records[i] for i in sorted(records)]
         save_json(out / INDEX_FILE, {"pairs": ordered, "finished": len(records) == len(jobs)})
@@ -159,8 +165,6 @@ def _claim_run_folder(out: Path, config: MatchConfig, overwrite: bool) -> None:
             raise ConfigError(f"{out} holds a run made with another configuration (differs in: "
                               f"{', '.join(changed) or 'everything'}): use another output folder or --overwrite")
         return
-    from . import __version__
-
     save_json(run_file, {"slime_match_version": __version__, "config": current})
 
 
@@ -190,7 +194,7 @@ def _finished_counts(folder: Path) -> dict[str, Any]:
     return {"matches": summary["counts"]["matches"], "seconds": summary["seconds"]["total"]}
 
 
-def _match_one(matcher, job: PairJob, out: Path, plot: bool) -> dict[str, Any]:
+def _match_one(matcher: Matcher, job: PairJob, out: Path, plot: bool) -> dict[str, Any]:
     """Match one pair and write its folder; a failure (bad image, bug) is recorded, not raised."""
     start = time.perf_counter()
     try:
@@ -219,19 +223,12 @@ def _interrupted(error: BaseException) -> bool:
     return False
 
 
-def _advance(progress: tqdm, record: dict[str, Any]) -> None:
-    if record["status"] == "failed":
-        logger.warning("%s %s: %s", record["image0"], record["image1"], record["error"])
-    progress.set_postfix_str(f"{record['image0']} {record['image1']}: {record['matches'] or 0} matches")
-    progress.update()
-
-
-def _run_in_pool(matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool, workers: int,
-                 records: dict[int, dict[str, Any]], progress: tqdm) -> None:
-    """Match the ``todo`` pairs in ``workers`` spawned processes, each with a Matcher of ``matcher``'s
-    configuration and an equal share of the CPU cores (torch threads and, on CPU, Slime's own forked
-    workers); records are filled in as pairs finish. On an interruption the workers are stopped at once (a
-    pair's files are written all or nothing)."""
+def _match_in_pool(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool, workers: int
+                   ) -> Iterator[tuple[int, dict[str, Any]]]:
+    """(index, record) of the ``todo`` pairs as they finish in ``workers`` spawned processes, each with a
+    Matcher of ``matcher``'s configuration and an equal share of the CPU cores (torch threads and, on CPU,
+    Slime's own forked workers). On an interruption the workers are stopped at once (a pair's files are
+    written all or nothing)."""
     share = max(1, (os.cpu_count() or 1) // workers)
     config = copy.deepcopy(matcher.config)
     if config.slime.workers is None and matcher.device.type == "cpu":  # CUDA work stays unforked
@@ -239,9 +236,7 @@ def _run_in_pool(matcher, jobs: list[PairJob], todo: list[int], out: Path, plot:
     tasks = [(index, jobs[index], out, plot) for index in todo]
     pool = get_context("spawn").Pool(workers, initializer=_init_worker, initargs=(config, share))
     try:  # spawn, not fork: a forked copy of the parent's torch and OpenMP thread pools can deadlock
-        for index, record in pool.imap_unordered(_match_in_worker, tasks):
-            records[index] = record
-            _advance(progress, record)
+        yield from pool.imap_unordered(_match_in_worker, tasks)
         pool.close()
     except BaseException:
         pool.terminate()
