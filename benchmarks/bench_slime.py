@@ -1,5 +1,5 @@
 """Slime's speed next to its quality: per-stage seconds, peak memory, correct matches, the base Hz+ on the same
-pair, and the shared vs per-block and per-tile detection ablation; OpenCV SIFT as a same-process reference.
+pair, and the block detection ablation (merged vs scale vs block, tiles); OpenCV SIFT as a same-process reference.
 
     python benchmarks/bench_slime.py [--out results/bench_slime.json] [--descriptor tfeat] [--skip-ablation]
                                      [--skip-fast] [--skip-large]
@@ -12,10 +12,10 @@ Runs (each Slime run is timed once, after the base Hz+ on the same pair and conf
 * Slime, AffNet + OriNet + ``--descriptor`` (TFeat by default), at 640x480 and 1200x900;
 * weight-free Slime (Baumberg + gradient orientation + RootSIFT) at 640x480;
 * the ``slime-fast`` preset (block scales 1, 2 instead of the paper's 1, 2, 3), learned and weight-free, 640x480;
-* the ablation at 640x480, learned and weight-free: shared detection (one per block scale, ours) vs
-  per-block detection (each 256 px block crop on its own, the paper's prototype), and vs per-tile detection
-  (the blocks shared, each full-resolution tile of Sec. 3.8 detected on its own crop) -- same pair, same
-  everything else;
+* the ablation at 640x480, learned and weight-free: the default "merged" detection (each 256 px block crop
+  detected on its own, keypoints shared by overlapping blocks described once) vs "scale" (one detection per
+  block scale) vs "block" (each block crop detected and described on its own, the paper's prototype), and
+  vs tiles detected per crop (``tile_detection="block"``) -- same pair, same everything else;
 * OpenCV SIFT (8000 features) detect+describe of the same images.
 
 Quality: matches correct when the two-sided GT reprojection error is below t (paper t = 15 px, and 3 px),
@@ -180,16 +180,17 @@ def bench_slime_vs_base(name: str, options: dict[str, Any], pair, device: str, t
     return out
 
 
-ABLATIONS = {"per_block": {"shared_detection": False}, "per_tile": {"shared_tile_detection": False}}
+ABLATIONS = {"scale": {"detection": "scale"}, "block": {"detection": "block"},
+             "block_tiles": {"tile_detection": "block"}}
 
 
-def bench_ablation(label: str, options: dict, pair, device: str, shared_record: dict) -> dict:
-    """Slime with ``options`` and per-block, then per-tile detection, next to the shared-detection run of
-    the same pair."""
-    out = {"shared": shared_record}
+def bench_ablation(label: str, options: dict, pair, device: str, default_record: dict) -> dict:
+    """Slime with ``options`` and each detection choice of ``ABLATIONS``, next to the default run of the same
+    pair ("merged" blocks, "scale" tiles)."""
+    out = {"default": default_record}
     for name, option in ABLATIONS.items():
         out[name] = run_matcher(Matcher(make_config("slime", device=device, **option, **options)), pair)
-        out[f"{name}_over_shared_time"] = round(out[name]["wall_s"] / max(shared_record["wall_s"], 1e-9), 2)
+        out[f"{name}_over_default_time"] = round(out[name]["wall_s"] / max(default_record["wall_s"], 1e-9), 2)
     _print_ablation(label, out)
     return out
 
@@ -230,13 +231,13 @@ def _print_comparison(name: str, out: dict) -> None:
 
 
 def _print_ablation(label: str, out: dict) -> None:
-    print(f"\n== ablation, Slime {label} 640x480: shared vs per-block and per-tile detection")
-    for key in ("shared", *ABLATIONS):
+    print(f"\n== ablation, Slime {label} 640x480: block detection merged (default) vs scale vs block, tiles")
+    for key in ("default", *ABLATIONS):
         r = out[key]
         print(f"{key:9s} {r['wall_s']:8.2f} s  features {r['seconds'].get('features', 0):.2f} s, "
               f"block_pairs {r['seconds'].get('block_pairs', 0):.2f} s; {_quality_line(r)}")
     for key in ABLATIONS:
-        print(f"{key} / shared time: {out[f'{key}_over_shared_time']:.2f}x")
+        print(f"{key} / default time: {out[f'{key}_over_default_time']:.2f}x")
 
 
 # ---------------------------------------------------------------------------------------------- main
@@ -250,7 +251,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--skip-large", action="store_true", help="skip the 1200x900 run")
     parser.add_argument("--skip-fast", action="store_true", help="skip the slime-fast (block scales 1, 2) runs")
     parser.add_argument("--skip-ablation", action="store_true",
-                        help="skip the per-block and per-tile detection ablation (minutes on a CPU)")
+                        help="skip the block and tile detection ablation (minutes on a CPU)")
     args = parser.parse_args(argv)
     if args.device == "cuda" and not torch.cuda.is_available():
         raise SystemExit("--device cuda: no CUDA device available")
@@ -291,10 +292,10 @@ def main(argv: list[str] | None = None) -> dict:
                 f"Slime fast (block scales 1, 2) {label} 640x480", options, pairs["640x480"], args.device,
                 TARGETS_S[key], preset="slime-fast")
     if not args.skip_ablation:
-        for label, options, shared in ((learned, {"descriptor": args.descriptor}, runs[f"{learned} 640x480"]),
-                                       ("weight-free", WEIGHT_FREE, weight_free)):
-            runs[f"ablation shared vs per-block and per-tile detection, {label} 640x480"] = bench_ablation(
-                label, options, pairs["640x480"], args.device, shared["slime"])
+        for label, options, default in ((learned, {"descriptor": args.descriptor}, runs[f"{learned} 640x480"]),
+                                        ("weight-free", WEIGHT_FREE, weight_free)):
+            runs[f"ablation block detection merged vs scale vs block, tiles, {label} 640x480"] = bench_ablation(
+                label, options, pairs["640x480"], args.device, default["slime"])
     print()
     runs["opencv_sift"] = bench_opencv_sift(pairs)
     report["meta"]["load_average_end"] = [round(x, 2) for x in os.getloadavg()]

@@ -2,7 +2,7 @@
 next to the base Hz+ and to a bound from detection alone.
 
     python benchmarks/stage_coverage.py graf hpatches [--rotations 90,180] [--descriptor tfeat]
-        [--slime-options shared_detection=false,...] [--out results/stage_coverage.json]
+        [--slime-options detection=scale,...] [--out results/stage_coverage.json]
 
 Per pair (raw matches, correct = two-sided error < 15 px, the paper's coverage: min of the two images):
 - ``repeatable``: HarrisZ+ keypoints of the whole image whose ground-truth partner has a detected keypoint
@@ -106,7 +106,7 @@ def main() -> None:
     parser.add_argument("--descriptor", default="tfeat", help="descriptor of Hz+ and of Slime's base")
     parser.add_argument("--slime-options", default="",
                         help="make_config overrides for Slime only, as in a `slime bench` method spec, e.g. "
-                             "shared_detection=false,shared_tile_detection=false")
+                             "detection=scale,tile_detection=block")
     parser.add_argument("--out", type=Path, default=Path("results/stage_coverage.json"))
     args = parser.parse_args()
     slime_options = parse_method_spec(f"slime:{args.slime_options}")[1]

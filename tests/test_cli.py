@@ -60,11 +60,13 @@ def test_slime_stages_and_viz(pair, tmp_path, capsys):
         f"{s}.png" for s in ("blocks", "tiles", "planes", "superset", "fbar", "ftheta", "tile_matches", "final")}
 
 
-def test_slime_per_block_detection(pair, tmp_path, capsys):
-    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--per-block", "--no-plot")
+def test_slime_detection_option(pair, tmp_path, capsys):
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--detection", "scale", "--no-plot")
     assert code == 0, err
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert summary["config"]["slime"]["shared_detection"] is False and summary["counts"]["matches"] > 0
+    assert summary["config"]["slime"]["detection"] == "scale" and summary["counts"]["matches"] > 0
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "r", "--base", "rootsift", "--detection", "merged")
+    assert code == 2 and "'merged' needs the hz+ base" in err
 
 
 def test_blank_image_gives_explicit_empty_result(pair, tmp_path, capsys, caplog):

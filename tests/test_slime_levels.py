@@ -1,4 +1,5 @@
-"""Slime block levels: shared (one detection per scale) vs per-block detection (the paper's prototype)."""
+"""Slime block levels: one detection per scale, per block (the paper's prototype), or per block with the shared
+keypoints of overlapping blocks merged and described once."""
 
 import dataclasses
 
@@ -9,6 +10,7 @@ import torch
 from conftest import DATA, require
 
 from slime_match.config import make_config
+from slime_match.errors import ConfigError
 from slime_match.eval.metrics import correct_matches_homography
 from slime_match.geometry.ransac import HomographyRansacConfig
 from slime_match.io import load_image
@@ -21,6 +23,7 @@ from slime_match.slime.block_matching import (
     describe_fixed_bins,
     fixed_features,
     fork_map,
+    merge_keypoints,
     ransac_batches,
     translate_features,
 )
@@ -50,7 +53,7 @@ def levels():
     pipeline = make_base_pipeline(BaseConfig(**WEIGHT_FREE))
     blocks = [b for b in make_blocks(*SIZE) if b.scale_index == 0]  # factor 0.8: 256 x 192, two blocks
     shared = build_levels(pipeline, image, blocks)
-    per_block = build_levels(pipeline, image, blocks, shared=False)
+    per_block = build_levels(pipeline, image, blocks, detection="block")
     return pipeline, blocks, corners, shared, per_block
 
 
@@ -103,6 +106,48 @@ def test_fixed_orientation_descriptors_use_the_crop_context(levels):
         assert (wrong.descriptors * ref).sum(dim=1).median() < 0.9
 
 
+def test_merged_levels_describe_the_blocks_own_keypoints_once(levels):
+    """Merged detection: each block keeps the keypoints its own crop detected (as with per-block detection),
+    the ones both blocks found are one keypoint, and all are described on the whole scaled image."""
+    pipeline, blocks, _, shared, per_block = levels
+    image, _ = _squares()
+    merged = build_levels(pipeline, image, blocks, detection="merged")
+    assert len(merged) == 1 and merged[0].blocks == [0, 1] and merged[0].origin == (0.0, 0.0)
+    lv = merged[0]
+    xy = lv.features.xy.numpy()
+    for k, own in enumerate(per_block):
+        d, _ = _nearest(own.features.xy.numpy(), xy[lv.members[k]])
+        assert len(lv.members[k]) == len(own.features) and d.max() <= 1.0 + 1e-6
+    both = len(per_block[0].features) + len(per_block[1].features)
+    assert len(np.intersect1d(*lv.members)) > 0 and len(lv.features) < both
+    assert len(lv.features) == len(np.union1d(*lv.members))
+    # described on the whole scaled image: the whole-image detection's descriptors where the keypoints
+    # coincide (the crops' own detector normalisation moves them by hundredths of a pixel)
+    d, j = _nearest(xy, shared[0].features.xy.numpy())
+    same = d < 0.1
+    assert same.mean() > 0.5
+    cosine = (lv.features.descriptors[torch.from_numpy(same)] * shared[0].features.descriptors[j[same]]).sum(dim=1)
+    assert cosine.min() > 0.99
+
+
+def test_merge_keypoints_keeps_the_strongest_of_each_group_per_level():
+    def part(rows):
+        rows = np.array(rows, np.float32)
+        return (rows[:, :2], np.repeat(np.eye(2, dtype=np.float32)[None], len(rows), 0), rows[:, 2],
+                rows[:, 3].astype(np.int64))
+
+    a = part([[10.0, 10.0, 1.0, 0], [50.0, 50.0, 2.0, 1], [30.0, 30.0, 0.5, 0]])
+    b = part([[10.6, 9.2, 3.0, 0], [50.3, 50.0, 4.0, 2], [80.0, 5.0, 1.0, 0]])
+    keypoints, members = merge_keypoints([a, b], radius=1.0)
+    # groups: {a0, b0} (b0 stronger), a1, a2, b1 (level 2: not a1's group), b2; in decreasing response
+    np.testing.assert_allclose(keypoints.xy.numpy(), [[50.3, 50.0], [10.6, 9.2], [50.0, 50.0], [80.0, 5.0],
+                                                      [30.0, 30.0]], atol=1e-6)
+    assert keypoints.level.tolist() == [2, 0, 1, 0, 0]
+    assert [m.tolist() for m in members] == [[1, 2, 4], [0, 1, 3]]
+    far = merge_keypoints([a, b], radius=0.5)[0]
+    assert len(far) == 6
+
+
 def test_fork_map_and_forked_descriptors_equal_one_process(levels):
     assert fork_map(lambda k: k * k, 11, 2, 3) == [k * k for k in range(11)]
     pipeline, _, _, shared, _ = levels
@@ -120,10 +165,10 @@ def test_forked_detections_equal_one_process(levels):
     the same levels, in request order, scales and blocks in order."""
     pipeline, blocks, _, _, _ = levels
     image, _ = _squares()
-    requests = [LevelRequest(image, blocks), LevelRequest(image[::-1].copy(), blocks, shared=False),
-                LevelRequest(image, blocks, regions_only=True)]
+    requests = [LevelRequest(image, blocks), LevelRequest(image[::-1].copy(), blocks, detection="block"),
+                LevelRequest(image, blocks, regions_only=True), LevelRequest(image, blocks, detection="merged")]
     one, two = (build_levels_many(pipeline, requests, workers) for workers in (1, 2))
-    assert [[lv.blocks for lv in r] for r in two] == [[[0, 1]], [[0], [1]], [[0, 1]]]
+    assert [[lv.blocks for lv in r] for r in two] == [[[0, 1]], [[0], [1]], [[0, 1]], [[0, 1]]]
     assert two[2][0].features.descriptors.shape[1] == 0 and two[0][0].features.descriptors.shape[1] > 0
     flat = ([lv for r in levels_of for lv in r] for levels_of in (one, two))
     for a, b in zip(*flat, strict=True):
@@ -172,7 +217,18 @@ def test_per_block_slime_end_to_end_on_a_real_pair():
     s[:2, 2] = -0.25  # pixel-centre convention of a 2x downscale
     a, b = (cv2.resize(im, (im.shape[1] // 2, im.shape[0] // 2), interpolation=cv2.INTER_AREA) for im in (a, b))
     h = s @ np.loadtxt(folder / "H1to3p") @ np.linalg.inv(s)
-    result = Matcher(make_config("slime", shared_detection=False, **WEIGHT_FREE))(a, b)
+    result = Matcher(make_config("slime", detection="block", **WEIGHT_FREE))(a, b)
     ok = correct_matches_homography(result.keypoints0, result.keypoints1, h)
     assert ok.sum() > 100 and ok.mean() >= 0.9, (int(ok.sum()), ok.mean())
-    assert result.summary["config"]["slime"]["shared_detection"] is False
+    assert result.summary["config"]["slime"]["detection"] == "block"
+
+
+def test_detection_choices_are_validated():
+    assert make_config("slime").slime.detection is None  # the base's: merged for Hz+
+    assert make_config("slime-rootsift", detection="block").slime.detection == "block"
+    with pytest.raises(ConfigError, match="invalid detection 'tiles'"):
+        make_config("slime", detection="tiles")
+    with pytest.raises(ConfigError, match="tile_detection 'merged' needs the hz\\+ base"):
+        make_config("slime-keynet", tile_detection="merged")
+    with pytest.raises(ValueError, match="detection must be one of"):
+        LevelRequest(np.zeros((8, 8, 3)), [], detection="tile")

@@ -14,7 +14,7 @@ logger = logging.getLogger("slime_match")
 
 
 def _add_match_options(parser: argparse.ArgumentParser) -> None:
-    from .config import RANSAC_CHOICES
+    from .config import DETECTIONS, RANSAC_CHOICES
 
     parser.add_argument("--method", default="slime", choices=["slime", "hz+", "rootsift", "keynet"],
                         help="Slime (default) or a base pipeline alone")
@@ -37,10 +37,11 @@ def _add_match_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scales", type=_scales, default=None,
                         help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper; "
                              "1,2 is about 2.5x faster, see the README)")
-    parser.add_argument("--per-block", dest="shared_detection", action="store_false", default=None,
-                        help="Slime: detect and describe every block crop on its own, as the paper's prototype, "
-                             "instead of once per block scale (1.5-2x slower, more coverage and "
-                             "precision, see the README)")
+    parser.add_argument("--detection", default=None, choices=DETECTIONS,
+                        help="Slime: how blocks get keypoints: 'merged' (the hz+ default) detects every block "
+                             "crop on its own and describes shared keypoints once, 'block' also describes per "
+                             "crop (the paper's prototype, slower), 'scale' detects once per block scale "
+                             "(fastest, the RootSIFT and Key.Net default; fewer matches in low-texture scenes)")
 
 
 def _scales(text: str) -> tuple[int, ...]:
@@ -55,7 +56,7 @@ def _scales(text: str) -> tuple[int, ...]:
 
 def _options(args: argparse.Namespace) -> dict:
     keys = ("base", "descriptor", "shape", "orientation", "upright", "ransac", "threshold", "seed", "device",
-            "weights_dir", "magnification", "scales", "shared_detection")
+            "weights_dir", "magnification", "scales", "detection")
     return {key: getattr(args, key) for key in keys}
 
 

@@ -9,6 +9,7 @@ from typing import Any
 
 from .errors import ConfigError
 from .pipelines import BASE_NAMES, BaseConfig
+from .slime.block_matching import DETECTIONS
 from .slime.pipeline import SlimeConfig
 
 METHODS = ("slime", "hz+", "rootsift", "keynet")
@@ -49,6 +50,13 @@ class MatchConfig:
         _choice("device", self.device, ("auto", "cpu", "cuda"))
         if not self.threshold > 0:
             raise ConfigError(f"threshold must be > 0 px, got {self.threshold}")
+        for name in ("detection", "tile_detection"):
+            value = getattr(self.slime, name)
+            if value is not None or name == "tile_detection":
+                _choice(name, value, DETECTIONS)
+            if value == "merged" and self.base.name != "hz+":
+                raise ConfigError(f"{name} 'merged' needs the hz+ base (a detector apart from the descriptor); "
+                                  f"the {self.base.name} base takes 'scale' or 'block'")
         return self
 
     def to_dict(self) -> dict[str, Any]:

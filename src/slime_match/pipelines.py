@@ -34,7 +34,7 @@ from .matching import blob, dtm
 from .matching.blob import BlobConfig, blob_match
 from .matching.dtm import DTMConfig, dtm_filter
 from .matching.nn import match_fginn
-from .types import Features, Matches
+from .types import Features, Keypoints, Matches
 
 logger = logging.getLogger("slime_match")
 
@@ -85,10 +85,13 @@ class BasePipeline:
         slime_global_dtm: whether Slime ends with a global DTM over its matches on this base (the paper:
             yes for Hz+ and RootSIFT; not for Key.Net, where a global AdaLAM is "mostly equivalent to running
             the base Key.Net alone").
+        slime_detection: Slime's default block detection on this base (``SlimeConfig.detection``): "merged"
+            where the detector runs apart from the patch stages (Hz+), else "scale".
     """
 
     name: str = "base"
     slime_global_dtm: bool = True
+    slime_detection: str = "scale"
 
     def prepare(self, image: np.ndarray) -> Any:
         raise NotImplementedError
@@ -100,6 +103,17 @@ class BasePipeline:
         """Keypoints with their shape frames only (no orientation, (N, 0) descriptors): for regions that
         will only ever be described under fixed orientations (Slime's tiles)."""
         raise NotImplementedError
+
+    def detect_keypoints(self, image: np.ndarray) -> Keypoints:
+        """The detector alone on an (H, W, 3) float image (Slime's merged per-block detection); only
+        pipelines whose ``slime_detection`` is "merged" have it."""
+        raise ConfigError(f"the {self.name} base pipeline has no detector separate from its descriptor: "
+                          "Slime's 'merged' detection needs one (use detection 'scale' or 'block')")
+
+    def describe_keypoints(self, context: Any, keypoints: Keypoints, regions_only: bool = False) -> Features:
+        """Features of ``keypoints`` (from :meth:`detect_keypoints`, in the context's pixels) on the image of
+        ``context``; ``regions_only`` as for :meth:`detect_regions`."""
+        raise ConfigError(f"the {self.name} base pipeline cannot describe given keypoints")
 
     def describe_fixed(self, context: Any, features: Features, angle: float) -> Features:
         raise NotImplementedError
@@ -136,6 +150,7 @@ class HzPlusPipeline(BasePipeline):
     """Hz+: HarrisZ+ -> AffNet|Baumberg -> OriNet|gradient|upright -> HardNet|TFeat|RootSIFT -> Blob -> DTM."""
 
     name = "hz+"
+    slime_detection = "merged"
 
     def __init__(self, config: BaseConfig, device: torch.device) -> None:
         self.config = config
@@ -154,11 +169,17 @@ class HzPlusPipeline(BasePipeline):
         return HzContext(tensor, PatchPyramid(tensor))
 
     def detect(self, context: HzContext) -> Features:
-        keypoints = detect_harrisz(context.image, self.harrisz)
-        return self.extractor.extract(context.image, keypoints, pyramid=context.pyramid)
+        return self.describe_keypoints(context, detect_harrisz(context.image, self.harrisz))
 
     def detect_regions(self, context: HzContext) -> Features:
-        keypoints = detect_harrisz(context.image, self.harrisz)
+        return self.describe_keypoints(context, detect_harrisz(context.image, self.harrisz), regions_only=True)
+
+    def detect_keypoints(self, image: np.ndarray) -> Keypoints:
+        return detect_harrisz(to_tensor(image, self.device), self.harrisz)
+
+    def describe_keypoints(self, context: HzContext, keypoints: Keypoints, regions_only: bool = False) -> Features:
+        if not regions_only:
+            return self.extractor.extract(context.image, keypoints, pyramid=context.pyramid)
         shape_laf = self.extractor.shape_frames(context.pyramid, keypoints)
         descriptors = torch.zeros(len(keypoints), 0, device=shape_laf.device)
         return Features(shape_laf, descriptors, keypoints.response.to(shape_laf.device), shape_laf)

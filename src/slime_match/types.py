@@ -39,6 +39,10 @@ class Keypoints:
         """Keypoints selected by a boolean mask or an index tensor."""
         return Keypoints(self.xy[index], self.ellipse[index], self.response[index], self.level[index])
 
+    def to(self, device: torch.device | str) -> Keypoints:
+        """The keypoints on ``device``."""
+        return Keypoints(*(t.to(device) for t in (self.xy, self.ellipse, self.response, self.level)))
+
 
 @dataclass
 class Features:

@@ -5,8 +5,14 @@ once per image and block scale on the whole scaled image and shared by every blo
 keypoint (a block owns the keypoints of its core, i.e. the block minus its 32 px padding); descriptors
 under a fixed orientation are computed once per (scale, orientation bin) and only for the keypoints that
 a block pair needs; RANSACs of all block pairs run as one batch; the detections, block pairs and RANSAC
-batches are spread over forked worker processes.  ``LevelRequest(shared=False)`` is the paper prototype's
-alternative: each block crop (zero-padded box) is detected and described on its own.
+batches are spread over forked worker processes.  How blocks get their keypoints (``LevelRequest.detection``):
+
+* "scale": one detection per block scale on the whole scaled image, each block owning its core's keypoints;
+* "block": the paper's prototype, each block crop (zero-padded box) detected and described on its own, so
+  that the adaptive HarrisZ+ thresholds follow the block's own content;
+* "merged": the block crops are detected on their own as in "block", the keypoints that overlapping blocks
+  share (same detector level, within ``MERGE_RADIUS`` px) are merged, and the patch stages (shape,
+  orientation, descriptor) run once per scale on the whole scaled image for the merged keypoints.
 """
 
 from __future__ import annotations
@@ -28,8 +34,9 @@ import torch
 from ..features.laf import set_laf_angle
 from ..geometry.ransac import HomographyRansacConfig, ransac_homography_many
 from ..pipelines import BasePipeline
-from ..types import Features, Matches
+from ..types import Features, Keypoints, Matches
 from .blocks import Block, points_in_blocks, resize_lanczos
+from .clusters import greedy_clusters
 from .planes import relative_orientation
 
 logger = logging.getLogger("slime_match")
@@ -101,6 +108,10 @@ def _features_from_numpy(arrays: tuple[np.ndarray | None, ...], device: torch.de
     return Features(*(None if a is None else torch.from_numpy(a).to(device) for a in arrays))
 
 
+DETECTIONS = ("scale", "block", "merged")
+MERGE_RADIUS = 1.0  # scaled px: keypoints of one detector level this close (per coordinate) are one keypoint
+
+
 @dataclass
 class LevelRequest:
     """One image's blocks (or tiles) to detect, for ``build_levels_many``.
@@ -110,26 +121,32 @@ class LevelRequest:
         blocks: its blocks (``make_blocks``) or tiles (``make_tiles``).
         regions_only: keep only the shape frames (no own orientation or descriptors): enough for regions
             that are only described under fixed orientations (the tiles, Sec. 3.8).
-        shared: True: one detection per scale shared by its blocks (each block owns the keypoints of its
-            core). False (the paper prototype): each block's zero-padded crop is detected and described on
-            its own and keeps the keypoints of its core.
+        detection: "scale", "block" or "merged" (see the module docstring); each block keeps the keypoints
+            of its core.
     """
 
     image: np.ndarray
     blocks: list[Block]
     regions_only: bool = False
-    shared: bool = True
+    detection: str = "scale"
+
+    def __post_init__(self) -> None:
+        if self.detection not in DETECTIONS:
+            raise ValueError(f"detection must be one of {DETECTIONS}, got {self.detection!r}")
 
 
 @dataclass
 class _Detection:
-    """One detection to run: a whole scaled image (``block`` None) or one block crop of it."""
+    """One detection to run: a whole scaled image (``block`` None) or one block crop of it; with
+    ``keypoints`` (merged detection), only the patch stages on the whole scaled image."""
 
     request: int
     blocks: list[int]
     scaled: np.ndarray
     context: Any
     block: Block | None
+    keypoints: Keypoints | None = None
+    members: list[np.ndarray] | None = None
 
     @property
     def pixels(self) -> int:
@@ -149,24 +166,35 @@ def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], work
         Per request: shared, one ScaleLevel per distinct block scale, in increasing scale index; per block,
         one ScaleLevel per block, in block order. Features are in scaled-image pixels either way.
     """
-    detections = []
+    detections, merged = [], []
     for r, request in enumerate(requests):
         blocks = request.blocks
         for scale_index in sorted({b.scale_index for b in blocks}):
             members_blocks = [i for i, b in enumerate(blocks) if b.scale_index == scale_index]
             scaled = resize_lanczos(request.image, blocks[members_blocks[0]].factor)
-            if request.shared:
+            if request.detection == "scale":
                 detections.append(_Detection(r, members_blocks, scaled, pipeline.prepare(scaled), None))
-            else:
+            elif request.detection == "block":
                 detections += [_Detection(r, [i], scaled, pipeline.prepare(blocks[i].crop(scaled)), blocks[i])
                                for i in members_blocks]
+            else:
+                merged.append(_Detection(r, members_blocks, scaled, None, None))
+    if merged:
+        with torch_threads(1):
+            for d, (keypoints, members) in zip(merged, _merged_keypoints(pipeline, merged, requests, workers)):
+                device = getattr(pipeline, "device", torch.device("cpu"))
+                d.context, d.keypoints, d.members = pipeline.prepare(d.scaled), keypoints.to(device), members
+        detections += merged
     order = sorted(range(len(detections)), key=lambda k: -detections[k].pixels)
     forked = workers > 1
 
     def detect(k: int) -> Features | tuple:
         d = detections[order[k]]
         regions_only = requests[d.request].regions_only
-        features = pipeline.detect_regions(d.context) if regions_only else pipeline.detect(d.context)
+        if d.keypoints is not None:
+            features = pipeline.describe_keypoints(d.context, d.keypoints, regions_only)
+        else:
+            features = pipeline.detect_regions(d.context) if regions_only else pipeline.detect(d.context)
         return _features_to_numpy(features) if forked else features
 
     found: list[Any] = [None] * len(detections)
@@ -181,9 +209,56 @@ def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], work
     return levels
 
 
+def _merged_keypoints(pipeline: BasePipeline, levels: list[_Detection], requests: list[LevelRequest],
+                      workers: int) -> list[tuple[Keypoints, list[np.ndarray]]]:
+    """Merged detection: the detector on every block crop of ``levels`` (forked over ``workers``), then per
+    level the core keypoints of its blocks, merged.
+
+    Returns:
+        Per level: the merged keypoints in scaled-image px (the strongest of each group, see
+        ``merge_keypoints``) and per block of the level the indices of its keypoints among them.
+    """
+    crops = [(d, i) for d in levels for i in d.blocks]
+
+    def detect(k: int) -> tuple[np.ndarray, ...]:
+        d, i = crops[k]
+        block = requests[d.request].blocks[i]
+        keypoints = pipeline.detect_keypoints(block.crop(d.scaled))
+        keypoints = keypoints.subset(torch.from_numpy(block.in_core_local(keypoints.xy.cpu().numpy())))
+        xy = keypoints.xy.cpu().numpy() + np.array(block.box[:2], np.float32)
+        return (xy, *(t.cpu().numpy() for t in (keypoints.ellipse, keypoints.response, keypoints.level)))
+
+    found = iter(fork_map(detect, len(crops), workers, len(crops)))
+    return [merge_keypoints([next(found) for _ in d.blocks]) for d in levels]
+
+
+def merge_keypoints(parts: list[tuple[np.ndarray, ...]], radius: float = MERGE_RADIUS
+                    ) -> tuple[Keypoints, list[np.ndarray]]:
+    """The keypoints that several blocks detected, once.
+
+    Args:
+        parts: per block, its keypoints as arrays xy (n, 2) in scaled-image px, ellipse (n, 2, 2), response
+            (n,), level (n,).
+        radius: keypoints of the same detector level within this many px (per coordinate) are one, the
+            strongest response standing for the group.
+
+    Returns:
+        The merged keypoints (K), and per block the (n_b,) sorted unique indices of its keypoints among them.
+    """
+    xy, ellipse, response, level = (np.concatenate(column) for column in zip(*parts))
+    apart = 4.0 * radius * (level.astype(np.float64) + 1.0)  # different levels never within radius
+    rep, cluster = greedy_clusters(np.c_[xy, apart], -response, radius)
+    edges = np.cumsum([0] + [len(part[0]) for part in parts])
+    members = [np.unique(cluster[a:b]) for a, b in itertools.pairwise(edges)]
+    keypoints = Keypoints(*(torch.from_numpy(np.ascontiguousarray(a[rep])) for a in (xy, ellipse, response, level)))
+    return keypoints, members
+
+
 def _level(d: _Detection, features: Features, blocks: list[Block]) -> ScaleLevel:
     """The ScaleLevel of one detection: the scale's blocks and the features each owns (its core's)."""
     factor = blocks[d.blocks[0]].factor
+    if d.members is not None:  # merged detection: the blocks' own keypoints, described once
+        return ScaleLevel(factor, d.scaled.shape[:2], d.context, features, d.blocks, d.members)
     if d.block is not None:  # a block crop: keep its core's features, in scaled-image pixels
         inside = d.block.in_core_local(features.xy.detach().cpu().numpy())
         origin = (float(d.block.box[0]), float(d.block.box[1]))
@@ -197,9 +272,9 @@ def _level(d: _Detection, features: Features, blocks: list[Block]) -> ScaleLevel
 
 
 def build_levels(pipeline: BasePipeline, image: np.ndarray, blocks: list[Block],
-                 regions_only: bool = False, shared: bool = True, workers: int = 1) -> list[ScaleLevel]:
+                 regions_only: bool = False, detection: str = "scale", workers: int = 1) -> list[ScaleLevel]:
     """``build_levels_many`` for one image (see ``LevelRequest`` for the arguments)."""
-    return build_levels_many(pipeline, [LevelRequest(image, blocks, regions_only, shared)], workers)[0]
+    return build_levels_many(pipeline, [LevelRequest(image, blocks, regions_only, detection)], workers)[0]
 
 
 def orientation_bin(angle: float, bins: int) -> int:

@@ -65,10 +65,13 @@ class SlimeConfig:
             pipeline's ``slime_global_dtm`` (the paper's Slimed Key.Net runs none). Exact duplicates are merged
             either way.
         keep_stages: keep every stage's sets in the result (for ``slime viz`` / ``--save-stages``).
-        shared_detection: detect and describe each block scale once on the whole scaled image, each block
-            owning the keypoints of its core (ours, the sharing suggested by the paper's SM); False detects
-            on each 256 px block crop separately, as the paper's prototype (slower).
-        shared_tile_detection: the same choice for the full-resolution tiles of Sec. 3.8.
+        detection: how blocks get their keypoints (``block_matching.DETECTIONS``): "scale" detects and
+            describes each block scale once on the whole scaled image, each block owning its core's keypoints
+            (the sharing suggested by the paper's SM); "block" detects and describes each 256 px block crop on
+            its own, as the paper's prototype (adaptive detection per block, slower); "merged" detects each
+            block crop on its own but describes the keypoints shared by overlapping blocks once; None: the
+            base pipeline's ``slime_detection`` ("merged" for Hz+, "scale" for RootSIFT and Key.Net).
+        tile_detection: the same choice for the full-resolution tiles of Sec. 3.8 ("scale" by default).
     """
 
     blocks: BlockConfig = field(default_factory=BlockConfig)
@@ -81,8 +84,8 @@ class SlimeConfig:
     refine_tiles: bool = True
     global_dtm: bool | None = None
     keep_stages: bool = False
-    shared_detection: bool = True
-    shared_tile_detection: bool = True
+    detection: str | None = None
+    tile_detection: str = "scale"
 
 
 @dataclass
@@ -222,10 +225,11 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         pipeline.load_kernels()
         ransac_kernels.load_kernels()
     with timer("features"):  # the tiles' regions too (Sec. 3.8), so that all detections share the workers
-        requests = [LevelRequest(image0, blocks0, shared=config.shared_detection),
-                    LevelRequest(image1, blocks1, shared=config.shared_detection)]
+        detection = config.detection or pipeline.slime_detection
+        requests = [LevelRequest(image0, blocks0, detection=detection),
+                    LevelRequest(image1, blocks1, detection=detection)]
         if config.refine_tiles:
-            requests += [LevelRequest(image, tiles, regions_only=True, shared=config.shared_tile_detection)
+            requests += [LevelRequest(image, tiles, regions_only=True, detection=config.tile_detection)
                          for image, tiles in ((image0, tiles0), (image1, tiles1))]
         levels0, levels1, *tile_levels = build_levels_many(pipeline, requests, workers)
     with timer("block_pairs"), torch_threads(1):

@@ -20,6 +20,7 @@ from .block_matching import (
     to_block_frame,
 )
 from .blocks import Block
+from .clusters import greedy_clusters
 
 
 @dataclass
@@ -138,16 +139,7 @@ def cluster_representatives(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray
     Returns:
         (C,) index of each cluster's representative (its best-scored match), (K,) cluster of each match.
     """
-    ends = np.hstack([xy0, xy1])
-    tree = cKDTree(ends)
-    cluster = np.full(len(ends), -1, np.int64)
-    rep = []
-    for i in np.argsort(scores, kind="stable"):
-        if cluster[i] < 0:  # only representatives need their neighbours (a sixth of the matches on graf)
-            members = np.asarray(tree.query_ball_point(ends[i], radius, p=np.inf), np.int64)
-            cluster[members[cluster[members] < 0]] = len(rep)
-            rep.append(i)
-    return np.asarray(rep, np.int64), cluster
+    return greedy_clusters(np.hstack([xy0, xy1]), scores, radius)
 
 
 def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size1, keypoints0: np.ndarray,
