@@ -157,14 +157,15 @@ class _Detection:
 def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], workers: int = 1
                       ) -> list[list[ScaleLevel]]:
     """Detect and describe the blocks of several images: once per block scale on the whole (Lanczos-)scaled
-    image, or per block (see ``LevelRequest``).
+    image, per block, or detected per block and described per scale (see ``LevelRequest``).
 
-    The detections (one per image and scale, or per block) run in ``workers`` forked processes, the largest
-    first; each runs single-threaded torch, as in one process, so the features do not depend on ``workers``.
+    The detections (one per image and scale, or per block; "merged": first the block crops' detectors, then
+    one description per image and scale) run in ``workers`` forked processes, the largest first; each runs
+    single-threaded torch, as in one process, so the features do not depend on ``workers``.
 
     Returns:
-        Per request: shared, one ScaleLevel per distinct block scale, in increasing scale index; per block,
-        one ScaleLevel per block, in block order. Features are in scaled-image pixels either way.
+        Per request: "scale" and "merged" detection, one ScaleLevel per distinct block scale, in increasing
+        scale index; "block", one ScaleLevel per block, in block order. Features are in scaled-image pixels.
     """
     detections, merged = [], []
     for r, request in enumerate(requests):
@@ -180,9 +181,9 @@ def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], work
             else:
                 merged.append(_Detection(r, members_blocks, scaled, None, None))
     if merged:
+        device = getattr(pipeline, "device", torch.device("cpu"))
         with torch_threads(1):
             for d, (keypoints, members) in zip(merged, _merged_keypoints(pipeline, merged, requests, workers)):
-                device = getattr(pipeline, "device", torch.device("cpu"))
                 d.context, d.keypoints, d.members = pipeline.prepare(d.scaled), keypoints.to(device), members
         detections += merged
     order = sorted(range(len(detections)), key=lambda k: -detections[k].pixels)
@@ -224,7 +225,8 @@ def _merged_keypoints(pipeline: BasePipeline, levels: list[_Detection], requests
         d, i = crops[k]
         block = requests[d.request].blocks[i]
         keypoints = pipeline.detect_keypoints(block.crop(d.scaled))
-        keypoints = keypoints.subset(torch.from_numpy(block.in_core_local(keypoints.xy.cpu().numpy())))
+        core = torch.from_numpy(block.in_core_local(keypoints.xy.cpu().numpy())).to(keypoints.xy.device)
+        keypoints = keypoints.subset(core)
         xy = keypoints.xy.cpu().numpy() + np.array(block.box[:2], np.float32)
         return (xy, *(t.cpu().numpy() for t in (keypoints.ellipse, keypoints.response, keypoints.level)))
 
