@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from .errors import ConfigError
-from .pipelines import BASE_NAMES, BaseConfig
+from .pipelines import BASE_NAMES, PIPELINES, BaseConfig
 from .slime.block_matching import DETECTIONS
 from .slime.pipeline import SlimeConfig
 
@@ -54,7 +54,7 @@ class MatchConfig:
             value = getattr(self.slime, name)
             if value is not None or name == "tile_detection":
                 _choice(name, value, DETECTIONS)
-            if value == "merged" and self.base.name != "hz+":
+            if value == "merged" and PIPELINES[self.base.name].slime_detection != "merged":
                 raise ConfigError(f"{name} 'merged' needs the hz+ base (a detector apart from the descriptor); "
                                   f"the {self.base.name} base takes 'scale' or 'block'")
         return self

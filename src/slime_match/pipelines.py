@@ -432,16 +432,16 @@ def _empty_features(dim: int, device: torch.device) -> Features:
     return Features(zeros(0, 2, 3), zeros(0, dim), zeros(0), zeros(0, 2, 3))
 
 
+PIPELINES: dict[str, type[BasePipeline]] = {"hz+": HzPlusPipeline, "rootsift": RootSiftPipeline,
+                                            "keynet": KeyNetPipeline}
+
+
 def make_base_pipeline(config: BaseConfig, device: torch.device | str = "cpu") -> BasePipeline:
     """Build the base pipeline named by ``config.name``."""
-    device = torch.device(device)
-    if config.name == "hz+":
-        return HzPlusPipeline(config, device)
-    if config.name == "rootsift":
-        return RootSiftPipeline(config, device)
-    if config.name == "keynet":
-        return KeyNetPipeline(config, device)
-    raise ConfigError(f"unknown base pipeline {config.name!r}: choose one of {', '.join(BASE_NAMES)}")
+    if config.name not in PIPELINES:
+        raise ConfigError(f"unknown base pipeline {config.name!r}: choose one of {', '.join(BASE_NAMES)}")
+    return PIPELINES[config.name](config, torch.device(device))
 
 
-__all__ = ["BaseConfig", "BasePipeline", "HzPlusPipeline", "KeyNetPipeline", "RootSiftPipeline", "make_base_pipeline"]
+__all__ = ["PIPELINES", "BaseConfig", "BasePipeline", "HzPlusPipeline", "KeyNetPipeline", "RootSiftPipeline",
+           "make_base_pipeline"]
