@@ -3,6 +3,7 @@
 import math
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 
 from slime_match.geometry.fundamental import epipolar_distance, fundamental_8point
@@ -184,3 +185,18 @@ def test_global_orientation_filter_drops_rotated_plane():
     assert keep.tolist() == [True, True, True, False]
     assert theta_plus == np.float64(2 * np.pi / 16)  # the bin centre nearest to 0.3 rad
     np.testing.assert_allclose(theta, [np.pi / 8] * 3 + [np.pi / 8 + np.pi / 2])
+
+
+@pytest.mark.parametrize("mode", range(16))
+def test_global_orientation_filter_keeps_sets_exactly_45_degrees_off(mode):
+    # the global bin `mode` (three sets) and one set each at +-1, +-2 (exactly 45 deg) and +-3 bins away:
+    # only the 3-bin sets are off by more than 45 deg, whatever the rounding of the bin centres
+    step = 2 * np.pi / 16
+    offsets = [0, 0, 0, 1, -1, 2, -2, 3, -3]
+    rho = np.repeat([(mode + k) * step for k in offsets], 5)
+    table = _table(np.zeros((len(rho), 2)), np.zeros((len(rho), 2)), rho)
+    ts = _sets([range(5 * i, 5 * i + 5) for i in range(len(offsets))], len(rho), tile0=list(range(9)),
+               tile1=list(range(9)))
+    keep, _, theta_plus = global_orientation_filter(table, ts)
+    assert keep.tolist() == [abs(k) <= 2 for k in offsets]
+    np.testing.assert_allclose(np.cos(theta_plus - mode * step), 1.0)

@@ -81,6 +81,7 @@ class TileConfig:
 
 
 _D = TileConfig()  # defaults for the function signatures
+_BIN_ROUNDING = 1e-9  # radians: bin centres k 2 pi / bins differ from whole multiples of a bin by rounding only
 
 
 @dataclass
@@ -505,7 +506,10 @@ def global_orientation_filter(
     bins: int = _D.bins,
     t_theta_plus: float = _D.t_theta_plus,
 ) -> tuple[np.ndarray, np.ndarray, float]:
-    """F^theta: drop the sets whose dominant relative orientation disagrees with the global one (Sec. 3.7).
+    """F^theta: drop the sets whose dominant relative orientation is off the global one by more than t_theta_plus.
+
+    Both orientations are histogram bin centres, so they differ by whole bins: at the default pi/4 a set two
+    bins (exactly 45 deg) away is kept, three bins away dropped (Sec. 3.7: "cannot differ more than 45 deg").
 
     Args:
         table: (M rows) match table (weights count in the per-set histograms).
@@ -528,5 +532,5 @@ def global_orientation_filter(
         group_relative_orientation(theta[valid], np.zeros(int(valid.sum()), np.int64), 1, bins)[0]
     )
     with np.errstate(invalid="ignore"):
-        keep = valid & (np.abs(wrap_angle(theta - theta_plus)) < t_theta_plus)
+        keep = valid & (np.abs(wrap_angle(theta - theta_plus)) <= t_theta_plus + _BIN_ROUNDING)
     return keep, theta, theta_plus
