@@ -82,7 +82,7 @@ def test_global_dtm_merges_exact_duplicates():
     x1 = x0 + [10.0, 5.0]
     xy0, xy1 = np.vstack([x0, x0[:100]]), np.vstack([x1, x1[:100]])
     scores = rng.uniform(0, 1, 400)
-    k0, k1, s = global_dtm(xy0, xy1, scores, (220, 220), (220, 220), x0, x1)
+    k0, k1, s = global_dtm(xy0, xy1, scores, (220, 220), (220, 220))
     rows = np.hstack([k0, k1])
     assert len(np.unique(rows, axis=0)) == len(rows) and len(rows) > 250
     assert np.all(np.diff(s) >= 0)
@@ -102,7 +102,7 @@ def test_cluster_representatives_and_shared_verdicts():
     x1 = x0 + [10.0, 5.0]
     near0, near1 = x0[:80] + rng.uniform(-0.4, 0.4, (80, 2)), x1[:80] + rng.uniform(-0.4, 0.4, (80, 2))
     k0, k1, _ = global_dtm(np.vstack([x0, near0]), np.vstack([x1, near1]), rng.uniform(0, 1, 280), (220, 220),
-                           (220, 220), x0, x1)
+                           (220, 220))
     kept = {tuple(r) for r in np.round(np.hstack([k0, k1]), 6)}
     both = np.round(np.hstack([np.vstack([x0, near0]), np.vstack([x1, near1])]), 6)
     _, member = cluster_representatives(np.vstack([x0, near0]), np.vstack([x1, near1]), np.zeros(280))

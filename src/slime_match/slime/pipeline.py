@@ -168,12 +168,6 @@ def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks
     return table, h, side
 
 
-def _keypoints(levels) -> np.ndarray:
-    """(N, 2) float64 keypoint positions of full-resolution levels (none when there are no levels)."""
-    xy = [lv.features.xy.detach().cpu().numpy().astype(np.float64) for lv in levels]
-    return np.concatenate(xy) if xy else np.zeros((0, 2))
-
-
 def _workers(requested: int | None, pipeline: BasePipeline) -> int:
     """Worker processes for the block pairs: CUDA work stays in one process (CUDA does not survive fork)."""
     if requested is not None:
@@ -266,8 +260,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         all_scores = np.concatenate([table.score[in_ftheta], tile_scores])
         use_dtm = pipeline.slime_global_dtm if config.global_dtm is None else config.global_dtm
         if config.refine_tiles and use_dtm:
-            xy0, xy1, scores = global_dtm(all0, all1, all_scores, (h0, w0), (h1, w1), _keypoints(tile_levels0),
-                                          _keypoints(tile_levels1),
+            xy0, xy1, scores = global_dtm(all0, all1, all_scores, (h0, w0), (h1, w1),
                                           getattr(getattr(pipeline, "config", None), "dtm", None))
         else:
             if config.refine_tiles:

@@ -142,9 +142,8 @@ def cluster_representatives(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray
     return greedy_clusters(np.hstack([xy0, xy1]), scores, radius)
 
 
-def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size1, keypoints0: np.ndarray,
-               keypoints1: np.ndarray, config: DTMConfig | None = None) -> tuple[np.ndarray, np.ndarray,
-                                                                                  np.ndarray]:
+def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size1,
+               config: DTMConfig | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Final DTM on the union of tile and F^theta matches.
 
     Exact duplicate matches are merged first. Overlapping blocks and tiles leave clusters of matches a few
@@ -155,6 +154,11 @@ def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size
     12,375 correct matches; with representatives of 2 px grid cells graf 1 -> 3 rotated by 270 deg still
     kept 39 of 17,379 (12,012 with the 4 px greedy clusters).
 
+    The hull is not carved with unmatched keypoints (the base DTM's ``unmatched0/1``): the candidates come
+    from block levels and tiles, so no keypoint set is "the others" of them, and carving with the tile
+    keypoints collapsed graf 1 -> 6 rotated by 45 deg from 2312 correct input matches to 248 kept (1409
+    uncarved); over the 15 planar pairs it cost 0.007 coverage.
+
     Returns:
         xy0, xy1 (K, 2) and scores (K,) of the kept matches, sorted by score.
     """
@@ -162,7 +166,6 @@ def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size
         return xy0, xy1, scores
     xy0, xy1, scores = merge_duplicates(xy0, xy1, scores)
     rep, cluster = cluster_representatives(xy0, xy1, scores)
-    keep = dtm_filter(xy0[rep], xy1[rep], scores[rep], size0, size1, unmatched0=keypoints0,
-                      unmatched1=keypoints1, config=config).keep[cluster]
+    keep = dtm_filter(xy0[rep], xy1[rep], scores[rep], size0, size1, config=config).keep[cluster]
     order = np.argsort(scores[keep], kind="stable")
     return xy0[keep][order], xy1[keep][order], scores[keep][order]
