@@ -12,7 +12,7 @@ Per pair (raw matches, correct = two-sided error < 15 px, the paper's coverage: 
 - Slime's stages (Secs. 3.2-3.8): ``block_matches`` (all block-pair planes M_l), ``expanded`` (in some P_l),
   ``superset`` (H), ``epipolar`` (H after the Sec. 3.6 vote), ``fbar`` (F-bar, two sets a tile),
   ``ftheta`` (fused, orientation-filtered F^theta), ``tile_matches`` (Sec. 3.8 before the global DTM),
-  ``final``.
+  ``dtm_input`` (the global DTM's input: F^theta and the tile matches, exact duplicates merged), ``final``.
 A stage whose coverage falls well below the previous one is where area is lost.
 """
 
@@ -35,7 +35,8 @@ from slime_match.geometry.homography import project
 from slime_match.io import load_image, to_tensor
 from slime_match.matcher import Matcher
 
-STAGES = ("block_matches", "expanded", "superset", "epipolar", "fbar", "ftheta", "tile_matches", "final")
+STAGES = ("block_matches", "expanded", "superset", "epipolar", "fbar", "ftheta", "tile_matches", "dtm_input",
+          "final")
 
 
 def repeatable_matches(image0: np.ndarray, image1: np.ndarray, H: np.ndarray, t: float = 15.0
@@ -64,14 +65,18 @@ def stage_matches(stages: dict[str, np.ndarray]) -> dict[str, tuple[np.ndarray, 
         return t0[index], t1[index]
 
     superset = np.unique(stages["superset_indices"])
+    ftheta = rows(np.unique(stages["ftheta_indices"]))
+    union = np.unique(np.hstack([np.vstack([ftheta[0], stages["tile_matches_xy0"]]),
+                                 np.vstack([ftheta[1], stages["tile_matches_xy1"]])]), axis=0)
     return {
         "block_matches": (t0, t1),
         "expanded": rows(np.unique(stages["expanded_match"])),
         "superset": rows(superset),
         "epipolar": rows(superset[stages["epipolar_keep"][superset]]),
         "fbar": rows(np.unique(stages["fbar_indices"])),
-        "ftheta": rows(np.unique(stages["ftheta_indices"])),
+        "ftheta": ftheta,
         "tile_matches": (stages["tile_matches_xy0"], stages["tile_matches_xy1"]),
+        "dtm_input": (union[:, :2], union[:, 2:]),
         "final": (stages["final_xy0"], stages["final_xy1"]),
     }
 
