@@ -106,6 +106,17 @@ def test_fixed_orientation_descriptors_use_the_crop_context(levels):
         assert (wrong.descriptors * ref).sum(dim=1).median() < 0.9
 
 
+def test_fixed_features_of_a_block_without_keypoints_are_empty(levels):
+    """A block or tile without keypoints asks for a bin that nothing else needs: describe_fixed_bins has nothing
+    to describe, and its fixed features are empty instead of a missing cache entry."""
+    pipeline, _, _, shared, _ = levels
+    nothing = np.zeros(0, np.int64)
+    describe_fixed_bins(pipeline, [(shared[0], {11: nothing})], 16)
+    assert 11 not in shared[0].fixed
+    empty = fixed_features(shared[0], nothing, 11, 16)
+    assert len(empty) == 0 and empty.descriptors.shape[1] == shared[0].features.descriptors.shape[1]
+
+
 def test_merged_levels_describe_the_blocks_own_keypoints_once(levels):
     """Merged detection: each block keeps the keypoints its own crop detected (as with per-block detection),
     the ones both blocks found are one keypoint, and all are described on the whole scaled image."""

@@ -324,7 +324,12 @@ def describe_fixed_bins(pipeline: BasePipeline, requests: list[tuple[ScaleLevel,
 
 
 def fixed_features(level: ScaleLevel, index: np.ndarray, bin_index: int, bins: int) -> Features:
-    """Features ``index`` of a level under the fixed orientation of ``bin_index`` (see describe_fixed_bins)."""
+    """Features ``index`` of a level under the fixed orientation of ``bin_index`` (see describe_fixed_bins).
+
+    An empty ``index`` (a block or tile without keypoints, for which nothing was described) gives no features.
+    """
+    if len(index) == 0:
+        return level.features.subset(torch.zeros(0, dtype=torch.long, device=level.features.laf.device))
     computed, descriptors = level.fixed[bin_index]
     if not computed[index].all():
         raise RuntimeError("fixed-orientation descriptors requested before describe_fixed_bins")
