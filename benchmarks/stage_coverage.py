@@ -2,7 +2,7 @@
 next to the base Hz+ and to a bound from detection alone.
 
     python benchmarks/stage_coverage.py graf hpatches [--rotations 90,180] [--descriptor tfeat]
-        [--slime-options detection=scale,...] [--out results/stage_coverage.json]
+        [--slime-options detection=scale,...] [--scales 1,2,3,4] [--out results/stage_coverage.json]
 
 Per pair (raw matches, correct = two-sided error < 15 px, the paper's coverage: min of the two images):
 - ``repeatable``: HarrisZ+ keypoints of the whole image whose ground-truth partner has a detected keypoint
@@ -112,9 +112,13 @@ def main() -> None:
     parser.add_argument("--slime-options", default="",
                         help="make_config overrides for Slime only, as in a `slime bench` method spec, e.g. "
                              "detection=scale,tile_detection=block")
+    parser.add_argument("--scales", type=lambda text: tuple(int(part) for part in text.split(",")), default=None,
+                        help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper)")
     parser.add_argument("--out", type=Path, default=Path("results/stage_coverage.json"))
     args = parser.parse_args()
     slime_options = parse_method_spec(f"slime:{args.slime_options}")[1]
+    if args.scales:
+        slime_options["scales"] = args.scales
     slime_config = make_config("slime", descriptor=args.descriptor, **slime_options)
     slime_config.slime.keep_stages = True
     slime, base = Matcher(slime_config), Matcher(make_config("hz+", descriptor=args.descriptor))
