@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -35,20 +34,20 @@ from slime_match.eval.methods import make_method
 from slime_match.io import load_image
 
 
-def padded_pair(pair: Pair, angle_deg: float) -> Pair:
-    """``pair`` (image 1 an array) with image 1 centred on the canvas of its rotation by ``angle_deg``,
-    black around it; the padding is excluded from the valid area through mask 1."""
+def padded_pair(pair: Pair, canvas: Pair) -> Pair:
+    """``pair`` (image 1 an array) with image 1 centred, black around it, on the canvas of ``canvas``'s image 1
+    (its rotation); the padding is excluded from the valid area through mask 1."""
     image = pair.image1
     h, w = image.shape[:2]
-    c, s = abs(math.cos(math.radians(angle_deg))), abs(math.sin(math.radians(angle_deg)))
-    nw, nh = math.ceil(c * w + s * h - 1e-9), math.ceil(s * w + c * h - 1e-9)
+    nh, nw = canvas.image1.shape[:2]
     ox, oy = (nw - w) // 2, (nh - h) // 2
-    canvas = np.zeros((nh, nw) + image.shape[2:], image.dtype)
-    canvas[oy:oy + h, ox:ox + w] = image
+    padded = np.zeros((nh, nw) + image.shape[2:], image.dtype)
+    padded[oy:oy + h, ox:ox + w] = image
     shift = np.array([[1.0, 0.0, ox], [0.0, 1.0, oy], [0.0, 0.0, 1.0]])
     mask1 = np.ones((nh, nw), bool)
     mask1[oy:oy + h, ox:ox + w] = False if pair.mask1 is None else pair.mask1
-    return replace(transform_view(pair, 1, canvas, shift), name=f"{pair.name}@pad{angle_deg:g}", mask1=mask1)
+    name = canvas.name.replace("@rot", "@pad")
+    return replace(transform_view(pair, 1, padded, shift), name=name, mask1=mask1)
 
 
 def main() -> None:
@@ -70,7 +69,8 @@ def main() -> None:
     results: dict[str, dict[str, dict[str, float]]] = {}
     for name in args.pairs:
         original = replace(known[name], image1=load_image(known[name].image1))
-        for variant in (original, padded_pair(original, args.angle), rotated_pair(original, args.angle)):
+        rotated = rotated_pair(original, args.angle)
+        for variant in (original, padded_pair(original, rotated), rotated):
             images = load_pair_images(variant)
             raw = {}
             for spec, method in methods.items():

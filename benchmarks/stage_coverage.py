@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
+from slime_match.cli import parse_scales
 from slime_match.config import make_config
 from slime_match.eval.datasets import load_dataset, protocol_resize, rotated_pair, to_original
 from slime_match.eval.methods import parse_method_spec
@@ -112,7 +113,7 @@ def main() -> None:
     parser.add_argument("--slime-options", default="",
                         help="make_config overrides for Slime only, as in a `slime bench` method spec, e.g. "
                              "detection=scale,tile_detection=block")
-    parser.add_argument("--scales", type=lambda text: tuple(int(part) for part in text.split(",")), default=None,
+    parser.add_argument("--scales", type=parse_scales, default=None,
                         help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper)")
     parser.add_argument("--out", type=Path, default=Path("results/stage_coverage.json"))
     args = parser.parse_args()

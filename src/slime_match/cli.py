@@ -34,7 +34,7 @@ def _add_match_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"])
     parser.add_argument("--weights-dir", default=None, help="folder with model weights (else TORCH_HOME cache)")
     parser.add_argument("--magnification", type=float, default=None, help="patch magnification over regions")
-    parser.add_argument("--scales", type=_scales, default=None,
+    parser.add_argument("--scales", type=parse_scales, default=None,
                         help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper; "
                              "1,2 is about 2.5x faster, see the README)")
     parser.add_argument("--detection", default=None, choices=DETECTIONS,
@@ -44,7 +44,8 @@ def _add_match_options(parser: argparse.ArgumentParser) -> None:
                              "(fastest, the RootSIFT and Key.Net default; fewer matches in low-texture scenes)")
 
 
-def _scales(text: str) -> tuple[int, ...]:
+def parse_scales(text: str) -> tuple[int, ...]:
+    """Slime block scales from ``"1,2,3"`` (an argparse type: bad text raises ArgumentTypeError)."""
     try:
         scales = tuple(int(part) for part in text.split(","))
     except ValueError:
