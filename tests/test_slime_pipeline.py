@@ -178,6 +178,15 @@ def test_fewer_block_scales(graf_small):
     assert ok.sum() > 100 and ok.mean() >= 0.9, (int(ok.sum()), ok.mean())
 
 
+def test_block_scale_presets():
+    """slime-fast drops the finest block level, slime-fine adds a fourth; an explicit scales option wins."""
+    assert make_config("slime").slime.blocks.scales == (1, 2, 3)
+    assert make_config("slime-fast").slime.blocks.scales == (1, 2)
+    assert make_config("slime-fine").slime.blocks.scales == (1, 2, 3, 4)
+    assert make_config("slime-fine", scales=(2,)).slime.blocks.scales == (2,)
+    assert make_config("slime-fine").base.name == "hz+"
+
+
 def _counts(**values: int) -> dict[str, int]:
     return {"block_planes": 5, "superset_H": 40, "epipolar_kept": 100, "ftheta_matches": 90, "tile_matches": 7,
             **values}

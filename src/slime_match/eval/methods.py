@@ -108,6 +108,7 @@ REGISTRY: dict[str, tuple[str, Callable[..., MethodFn]]] = {
     "slime-upright": ("Slimed Hz+ (upright)", _preset("slime-upright")),
     "slime-rootsift": ("Slimed RootSIFT", _preset("slime-rootsift")),
     "slime-fast": ("Slimed Hz+ (block scales 1, 2)", _preset("slime-fast")),
+    "slime-fine": ("Slimed Hz+ (block scales 1-4)", _preset("slime-fine")),
     "hz+": ("Hz+", _preset("hz+")),
     "hz+-upright": ("Hz+ (upright)", _preset("hz+-upright")),
     "rootsift": ("RootSIFT", _preset("rootsift")),
