@@ -28,13 +28,14 @@ from scipy.spatial import cKDTree
 
 from slime_match.cli import parse_scales
 from slime_match.config import make_config
-from slime_match.eval.datasets import load_dataset, protocol_resize, rotated_pair, to_original
+from slime_match.eval.datasets import load_dataset, rotated_pair
 from slime_match.eval.methods import parse_method_spec
 from slime_match.eval.metrics import correct_matches_homography, coverage, valid_area_homography
 from slime_match.features.harrisz import detect_harrisz
 from slime_match.geometry.homography import project
 from slime_match.io import load_image, to_tensor
 from slime_match.matcher import Matcher
+from slime_match.resize import resize_image, to_original
 
 STAGES = ("block_matches", "expanded", "superset", "epipolar", "fbar", "ftheta", "tile_matches", "dtm_input",
           "final")
@@ -86,7 +87,7 @@ def pair_row(pair, slime: Matcher, base: Matcher) -> dict[str, dict[str, float]]
     """{entry: {matches, correct, precision, coverage}} for the bound, Hz+ and every Slime stage."""
     image0, image1 = load_image(pair.image0), load_image(pair.image1)
     valid0, valid1 = valid_area_homography(pair.H, image0.shape[:2], image1.shape[:2], pair.mask0, pair.mask1)
-    (a, s0), (b, s1) = (protocol_resize(im, pair.max_side, pair.size) for im in (image0, image1))
+    (a, s0), (b, s1) = (resize_image(im, pair.max_side, pair.size) for im in (image0, image1))
 
     def score(x0: np.ndarray, x1: np.ndarray, frame: bool = True) -> dict[str, float]:
         if frame:

@@ -125,11 +125,25 @@ def test_bad_options_and_missing_gpu(pair, tmp_path, capsys):
             main(["match", *pair, "-o", str(tmp_path), *bad])
     code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--threshold", "-1", "--method", "rootsift")
     assert code == 2 and "threshold" in err
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--max-side", "8", "--method", "rootsift")
+    assert code == 2 and "max_side" in err and not (tmp_path / "matches.npz").exists()
     import torch
 
     if not torch.cuda.is_available():
         code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--device", "cuda", "--method", "rootsift")
         assert code == 2 and "no CUDA" in err
+
+
+def test_max_side_shrinks_and_maps_back(pair, tmp_path, capsys):
+    """The 370 x 250 pair matched at --max-side 185: the summary gives both sizes, matches are in original px."""
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift", "--max-side", "185",
+                           "--no-plot")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["image_sizes"]["image0"] == [370, 250] and summary["working_sizes"]["image0"] == [185, 125]
+    assert summary["config"]["max_side"] == 185
+    keypoints = np.load(tmp_path / "matches.npz")["keypoints0"]
+    assert len(keypoints) > 20 and keypoints[:, 0].max() > 185 and keypoints.max() < 370
 
 
 def test_viz_bad_input(tmp_path, capsys, pair):

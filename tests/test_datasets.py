@@ -13,6 +13,7 @@ from slime_match.eval import datasets as D
 from slime_match.eval.metrics import correct_matches_disparity
 from slime_match.geometry.fundamental import epipolar_distance
 from slime_match.geometry.homography import project
+from slime_match.resize import resize_image, to_original
 
 
 def _rot(axis, deg):
@@ -241,19 +242,15 @@ def test_scannet_pairs_file_with_exif_rotation(tmp_path):
     assert np.allclose(v[:2] / v[2], (A @ u)[:2])
 
 
-def test_protocol_resize_roundtrip():
-    assert D.working_size(1600, 1200, max_side=1200) == (1200, 900)
-    assert D.working_size(800, 600, max_side=1200) == (800, 600)
-    assert D.working_size(1296, 968, size=(640, 480)) == (640, 480)
-    assert D.working_size(968, 1296, size=(640, 480)) == (480, 640)
+def test_scale_intrinsics_follows_the_protocol_resize():
     img = np.zeros((968, 1296, 3), np.uint8)
-    small, scale = D.protocol_resize(img, size=(640, 480))
+    small, scale = resize_image(img, size=(640, 480))
     assert small.shape == (480, 640, 3) and scale == pytest.approx((1296 / 640, 968 / 480))
     K = np.array([[1163.0, 0, 653.6], [0, 1164.8, 481.6], [0, 0, 1]])
     X = np.array([[0.3, -0.2, 2.0], [-0.5, 0.1, 3.0]])
     p_orig = X @ K.T
     p_small = X @ D.scale_intrinsics(K, scale).T
-    back = D.to_original(p_small[:, :2] / p_small[:, 2:], scale)
+    back = to_original(p_small[:, :2] / p_small[:, 2:], scale)
     assert np.allclose(back, p_orig[:, :2] / p_orig[:, 2:])
 
 

@@ -8,6 +8,7 @@ import torch
 from conftest import DATA, require
 
 from slime_match.config import make_config
+from slime_match.errors import ConfigError, ImageError
 from slime_match.eval.datasets import rotate_image
 from slime_match.eval.metrics import correct_matches_homography
 from slime_match.geometry.homography import project
@@ -176,6 +177,34 @@ def test_fewer_block_scales(graf_small):
     assert tuple(result.summary["config"]["slime"]["blocks"]["scales"]) == (1, 2)
     ok = correct_matches_homography(result.keypoints0, result.keypoints1, h)
     assert ok.sum() > 100 and ok.mean() >= 0.9, (int(ok.sum()), ok.mean())
+
+
+def test_max_side_matches_in_original_pixels():
+    """graf 1 -> 3 (800 x 640) matched at max_side 400: matches, stage points and boxes in original pixels."""
+    folder = require(DATA / "oxford_graf")
+    a, b = load_image(folder / "img1.png"), load_image(folder / "img3.png")
+    config = make_config("slime", scales=(1, 2), max_side=400, **WEIGHT_FREE)
+    config.slime.keep_stages = True
+    result = Matcher(config)(a, b)
+    sizes = result.summary
+    assert sizes["image_sizes"]["image0"] == [800, 640] and sizes["working_sizes"]["image0"] == [400, 320]
+    ok = correct_matches_homography(result.keypoints0, result.keypoints1, np.loadtxt(folder / "H1to3p"))
+    assert ok.sum() > 1000 and ok.mean() >= 0.9, (int(ok.sum()), ok.mean())
+    assert result.keypoints0.max(axis=0)[0] > 400  # not left in the 400 x 320 working frame
+    stages = result.stages
+    np.testing.assert_allclose(np.sort(stages["final_xy0"], axis=0), np.sort(result.keypoints0, axis=0))
+    assert stages["blocks0"][:, 2].max() == pytest.approx(799.5) and stages["tiles1"][:, 3].max() == pytest.approx(639.5)
+    own = stages["block_matches_plane"] == 0  # plane 0's matches follow its homography
+    moved, _ = project(stages["planes_H"][0], stages["block_matches_xy0"][own])
+    assert own.sum() >= 4 and np.median(np.linalg.norm(moved - stages["block_matches_xy1"][own], axis=1)) < 5
+
+
+def test_max_side_bad_values(graf_small):
+    with pytest.raises(ConfigError, match="max_side"):
+        make_config("hz+", max_side=16)
+    thin = np.zeros((40, 400, 3), np.float32)  # 400 x 40 shrunk to 100 x 10
+    with pytest.raises(ImageError, match="raise max_side"):
+        Matcher(make_config("hz+", max_side=100, **WEIGHT_FREE))(thin, graf_small[1])
 
 
 def test_block_scale_presets():

@@ -33,6 +33,9 @@ def _add_match_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="random seed (RANSAC sampling)")
     parser.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"])
     parser.add_argument("--weights-dir", default=None, help="folder with model weights (else TORCH_HOME cache)")
+    parser.add_argument("--max-side", type=int, default=None, metavar="PX",
+                        help="shrink images whose longest side is larger to this many px before matching "
+                             "(matches come back in original pixels); faster and lighter on large photos")
     parser.add_argument("--magnification", type=float, default=None, help="patch magnification over regions")
     parser.add_argument("--scales", type=parse_scales, default=None,
                         help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper; "
@@ -57,7 +60,7 @@ def parse_scales(text: str) -> tuple[int, ...]:
 
 def _options(args: argparse.Namespace) -> dict:
     keys = ("base", "descriptor", "shape", "orientation", "upright", "ransac", "threshold", "seed", "device",
-            "weights_dir", "magnification", "scales", "detection")
+            "weights_dir", "magnification", "scales", "detection", "max_side")
     return {key: getattr(args, key) for key in keys}
 
 

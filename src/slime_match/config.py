@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import numbers
 from dataclasses import dataclass, field
 from typing import Any
 
 from .errors import ConfigError
+from .io import MIN_IMAGE_SIDE
 from .pipelines import BASE_NAMES, PIPELINES, BaseConfig
 from .slime.block_matching import DETECTIONS
 from .slime.pipeline import SlimeConfig
@@ -30,6 +32,8 @@ class MatchConfig:
         threshold: post-processing RANSAC inlier threshold in px (the paper tests 5, 3, 2, 1).
         seed: seed of every random choice (RANSAC sampling), for reproducible runs.
         device: "auto" (CUDA when available), "cpu" or "cuda".
+        max_side: when set, images whose longest side is larger are shrunk to it (area interpolation)
+            before matching, and the matches are mapped back to original-image pixels (None: as given).
     """
 
     method: str = "slime"
@@ -39,6 +43,7 @@ class MatchConfig:
     threshold: float = 3.0
     seed: int = 0
     device: str = "auto"
+    max_side: int | None = None
 
     def validate(self) -> MatchConfig:
         _choice("method", self.method, METHODS)
@@ -48,6 +53,8 @@ class MatchConfig:
         _choice("shape", self.base.shape, ("affnet", "baumberg"))
         _choice("orientation", self.base.orientation, ("orinet", "gradient", "upright"))
         _choice("device", self.device, ("auto", "cpu", "cuda"))
+        if self.max_side is not None and not (isinstance(self.max_side, numbers.Integral) and self.max_side >= MIN_IMAGE_SIDE):
+            raise ConfigError(f"max_side must be an integer of at least {MIN_IMAGE_SIDE} px, got {self.max_side!r}")
         if not self.threshold > 0:
             raise ConfigError(f"threshold must be > 0 px, got {self.threshold}")
         for name in ("detection", "tile_detection"):

@@ -11,13 +11,14 @@ import torch
 
 from . import __version__
 from .config import MatchConfig, make_config
-from .errors import ConfigError
+from .errors import ConfigError, ImageError
 from .features.descriptors import resolve_descriptor
 from .geometry.backends import estimate_geometry
-from .io import ImageLike, load_image
+from .io import MIN_IMAGE_SIDE, ImageLike, load_image
 from .pipelines import make_base_pipeline
+from .resize import resize_image, to_original
 from .result import MatchResult
-from .slime.pipeline import run_slime
+from .slime.pipeline import run_slime, stages_to_original
 from .timing import StageTimer
 
 logger = logging.getLogger("slime_match")
@@ -57,9 +58,11 @@ class Matcher:
         """Match two images (paths, numpy arrays or torch tensors); see :func:`slime_match.match`."""
         timer = StageTimer()
         start = time.perf_counter()
-        with timer("load"):
-            array0, array1 = load_image(image0), load_image(image1)
         config = self.config
+        with timer("load"):
+            original0, original1 = load_image(image0), load_image(image1)
+            (array0, scale0), (array1, scale1) = (_working_image(image, config.max_side)
+                                                  for image in (original0, original1))
         stages = None
         warnings = list(self.warnings)
         if config.method == "slime":
@@ -68,6 +71,10 @@ class Matcher:
             warnings += output.warnings
         else:
             xy0, xy1, scores, counts = self._run_base(array0, array1, timer)
+        if (scale0, scale1) != ((1.0, 1.0), (1.0, 1.0)):
+            xy0, xy1 = to_original(xy0, scale0), to_original(xy1, scale1)
+            if stages is not None:
+                stages = stages_to_original(stages, scale0, scale1)
         inliers = model = kind = None
         if config.ransac != "none":
             backend, _, kind = config.ransac.rpartition("-")
@@ -83,7 +90,8 @@ class Matcher:
             "config": config.to_dict(),
             "pipeline": self.pipeline.describe(),
             "device": str(self.device),
-            "image_sizes": {"image0": list(array0.shape[1::-1]), "image1": list(array1.shape[1::-1])},
+            "image_sizes": {"image0": list(original0.shape[1::-1]), "image1": list(original1.shape[1::-1])},
+            "working_sizes": {"image0": list(array0.shape[1::-1]), "image1": list(array1.shape[1::-1])},
             "counts": counts,
             "seconds": {**timer.as_dict(), "total": round(time.perf_counter() - start, 4)},
             "warnings": warnings,
@@ -103,6 +111,16 @@ class Matcher:
         return xy0, xy1, matches.scores, counts
 
 
+def _working_image(image: np.ndarray, max_side: int | None) -> tuple[np.ndarray, tuple[float, float]]:
+    """The (H, W, 3) image shrunk to ``max_side`` (see :func:`resize_image`) and its (sx, sy) factors."""
+    working, scale = resize_image(image, max_side)
+    height, width = working.shape[:2]
+    if min(height, width) < MIN_IMAGE_SIDE:
+        raise ImageError(f"a {image.shape[1]}x{image.shape[0]} px image shrunk to max_side {max_side} would be "
+                         f"{width}x{height} px, smaller than {MIN_IMAGE_SIDE} px on a side: raise max_side")
+    return working, scale
+
+
 def match(image0: ImageLike, image1: ImageLike, method: str = "slime", **options: Any) -> MatchResult:
     """Match two images.
 
@@ -111,7 +129,8 @@ def match(image0: ImageLike, image1: ImageLike, method: str = "slime", **options
         method: a preset: "slime" (default), "slime-upright", "slime-rootsift", "hz+", "hz+-upright",
             "rootsift", "rootsift-upright".
         **options: flat overrides, e.g. ``descriptor="tfeat"``, ``ransac="fundamental"``, ``threshold=3``,
-            ``base="rootsift"``, ``device="cuda"``, ``seed=1`` (see :func:`slime_match.config.make_config`).
+            ``base="rootsift"``, ``device="cuda"``, ``seed=1``, ``max_side=1600`` (see
+            :func:`slime_match.config.make_config`).
 
     Returns:
         MatchResult with (K, 2) keypoints in original-image pixels, (K,) scores and a summary.

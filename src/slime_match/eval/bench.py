@@ -31,12 +31,13 @@ from tqdm import tqdm
 from slime_match.errors import ConfigError
 from slime_match.eval import metrics as M
 from slime_match.eval.code_version import UNKNOWN, code_version
-from slime_match.eval.datasets import Pair, load_dataset, protocol_resize, rotated_pair, to_original
+from slime_match.eval.datasets import Pair, load_dataset, rotated_pair
 from slime_match.eval.methods import PAPER_METHODS, make_method, method_label, parse_method_spec
 from slime_match.geometry.backends import estimate_geometry
 from slime_match.geometry.fundamental import fundamental_8point
 from slime_match.geometry.homography import homography_dlt
 from slime_match.io import load_image, save_json, save_npz
+from slime_match.resize import resize_image, to_original
 
 logger = logging.getLogger("slime_match")
 
@@ -132,7 +133,7 @@ def load_pair_images(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
 def predict(method, pair: Pair, images: tuple[np.ndarray, np.ndarray]) -> dict[str, np.ndarray]:
     """Run a method on a pair under the protocol resize; keypoints come back in the original frame, with the
     matching seconds and the :func:`code_version` that computed them."""
-    (im0, s0), (im1, s1) = (protocol_resize(im, pair.max_side, pair.size) for im in images)
+    (im0, s0), (im1, s1) = (resize_image(im, pair.max_side, pair.size) for im in images)
     xy0, xy1, scores, seconds = method(im0, im1)
     return {
         "keypoints0": to_original(np.asarray(xy0, np.float64).reshape(-1, 2), s0),

@@ -6,8 +6,8 @@ image 1, ``F`` satisfies ``x1^T F x0 = 0``, ``(R, t)`` maps camera-0 coordinates
 (``X1 = R X0 + t``), masks are boolean with True = excluded.
 
 Protocol resizing (MegaDepth longest side <= 1200 px, ScanNet 640x480) is described by ``Pair.max_side`` /
-``Pair.size``; :func:`protocol_resize` resizes an image accordingly and returns the factors that
-:func:`to_original` uses to bring coordinates back to the original frame.
+``Pair.size``; :func:`slime_match.resize.resize_image` resizes an image accordingly and returns the factors
+that :func:`slime_match.resize.to_original` uses to bring coordinates back to the original frame.
 """
 
 from __future__ import annotations
@@ -143,38 +143,6 @@ def _require_dir(path: Path | str, what: str) -> Path:
 
 # ----------------------------------------------------------------------------------------------------------
 # resizing protocol
-
-
-def working_size(
-    width: int, height: int, max_side: int | None = None, size: tuple[int, int] | None = None
-) -> tuple[int, int]:
-    """(w, h) an image of ``width x height`` px is resized to by the protocol (fixed size wins; a fixed
-    landscape ``size`` is transposed for portrait images)."""
-    if size is not None:
-        long, short = max(size), min(size)
-        return (int(long), int(short)) if width >= height else (int(short), int(long))
-    if max_side is not None and max(width, height) > max_side:
-        s = max_side / max(width, height)
-        return max(1, round(width * s)), max(1, round(height * s))
-    return int(width), int(height)
-
-
-def protocol_resize(
-    image: np.ndarray, max_side: int | None = None, size: tuple[int, int] | None = None
-) -> tuple[np.ndarray, tuple[float, float]]:
-    """Resize an (H, W[, C]) image by the protocol; returns it and the (sx, sy) factors original/resized."""
-    h, w = image.shape[:2]
-    nw, nh = working_size(w, h, max_side, size)
-    if (nw, nh) == (w, h):
-        return image, (1.0, 1.0)
-    interp = cv2.INTER_AREA if nw * nh < w * h else cv2.INTER_LINEAR
-    return cv2.resize(image, (nw, nh), interpolation=interp), (w / nw, h / nh)
-
-
-def to_original(xy: np.ndarray, scale: tuple[float, float]) -> np.ndarray:
-    """(N, 2) resized-frame points to the original frame (pixel centres map to pixel centres)."""
-    s = np.asarray(scale, np.float64)
-    return (np.asarray(xy, np.float64) + 0.5) * s - 0.5
 
 
 def scale_intrinsics(K: np.ndarray, scale: tuple[float, float]) -> np.ndarray:

@@ -20,6 +20,7 @@ from ..geometry import ransac_kernels
 from ..geometry.homography import project
 from ..geometry.ransac import HomographyRansacConfig
 from ..pipelines import BasePipeline
+from ..resize import homography_to_original, to_original
 from ..timing import StageTimer
 from .block_matching import (
     BlockPairMatches,
@@ -284,6 +285,24 @@ def _boxes_original(blocks: list[Block]) -> np.ndarray:
         lo = b.to_original(np.array([[b.core[0] - 0.5, b.core[1] - 0.5]]))[0]
         hi = b.to_original(np.array([[b.core[2] - 0.5, b.core[3] - 0.5]]))[0]
         out[i] = [*lo, *hi, b.scale_index]
+    return out
+
+
+def stages_to_original(
+    stages: dict[str, np.ndarray], scale0: tuple[float, float], scale1: tuple[float, float]
+) -> dict[str, np.ndarray]:
+    """Stage arrays of images matched resized by (sx, sy) = original / resized, in original-image pixels:
+    points, block and tile boxes and plane homographies (orientations stay as measured when matching)."""
+    out = dict(stages)
+    for image, scale in ((0, scale0), (1, scale1)):
+        for key, value in stages.items():
+            if key.endswith(f"_xy{image}"):
+                out[key] = to_original(value, scale)
+        for key in (f"blocks{image}", f"tiles{image}"):
+            boxes = stages[key].copy()
+            boxes[:, 0:2], boxes[:, 2:4] = to_original(boxes[:, 0:2], scale), to_original(boxes[:, 2:4], scale)
+            out[key] = boxes
+    out["planes_H"] = homography_to_original(stages["planes_H"], scale0, scale1)
     return out
 
 
