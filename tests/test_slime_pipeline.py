@@ -15,12 +15,13 @@ from slime_match.geometry.homography import project
 from slime_match.io import load_image
 from slime_match.matcher import Matcher
 from slime_match.slime.block_matching import BlockPairMatches, orientation_bin, torch_threads
-from slime_match.slime.blocks import make_blocks
+from slime_match.slime.blocks import make_blocks, make_tiles
 from slime_match.slime.pipeline import (
     MANY_BLOCK_PAIRS,
     block_planes_to_original,
     empty_result_reason,
     layout_warning,
+    tile_count_warning,
 )
 from slime_match.slime.refine import FlowGuide, cluster_representatives, global_dtm
 from slime_match.slime.tiles import TileConfig
@@ -236,6 +237,12 @@ def test_layout_warning_only_for_many_block_pairs():
     assert layout_warning(20, 20) is None
     assert layout_warning(MANY_BLOCK_PAIRS, 1) is None
     assert "4001 block pairs" in layout_warning(MANY_BLOCK_PAIRS + 1, 1)
+
+
+def test_tile_count_warning_names_max_side():
+    assert tile_count_warning(len(make_tiles(1536, 2048)), 12) is None
+    message = tile_count_warning(12, len(make_tiles(2560, 3200)))
+    assert "12 and 357 tiles" in message and "--max-side" in message
 
 
 def test_empty_slime_result_says_why(graf_small):

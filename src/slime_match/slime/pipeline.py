@@ -103,6 +103,7 @@ class SlimeOutput:
 
 
 MANY_BLOCK_PAIRS = 4000  # 10x a 4:3 image pair's 400 at the paper's scales: warn, the run will be slow
+MANY_TILES = 150  # tiles of one image: about 2048 x 1536 px (140), 12x a 640 x 480 image's
 
 
 def layout_warning(n_blocks0: int, n_blocks1: int) -> str | None:
@@ -112,6 +113,15 @@ def layout_warning(n_blocks0: int, n_blocks1: int) -> str | None:
     return (f"{n_blocks0 * n_blocks1} block pairs ({n_blocks0} x {n_blocks1} blocks; a 4:3 pair has 400): blocks "
             "follow each image's shorter side, so an elongated image makes Slime slow and memory-hungry; "
             "fewer block scales (--scales 1,2) or the base pipeline alone (--method hz+) are much faster")
+
+
+def tile_count_warning(n_tiles0: int, n_tiles1: int) -> str | None:
+    """A warning when an image is so large that its full-resolution tiles make Slime slow (Secs. 3.5-3.8)."""
+    if max(n_tiles0, n_tiles1) <= MANY_TILES:
+        return None
+    return (f"{n_tiles0} and {n_tiles1} tiles of 256 px (a 640x480 image has 12): the tiles, the base pipeline run "
+            "on them and the tile match sets grow with the image size, so Slime gets slow and memory-hungry; "
+            "--max-side 1600 (max_side=1600) shrinks the images before matching and maps the matches back")
 
 
 def empty_result_reason(counts: dict[str, int], tiles: TileConfig) -> str:
@@ -212,9 +222,9 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         warnings.append(message)
         logger.warning(message)
 
-    layout = layout_warning(len(blocks0), len(blocks1))
-    if layout:
-        warn(layout)
+    for message in (layout_warning(len(blocks0), len(blocks1)), tile_count_warning(len(tiles0), len(tiles1))):
+        if message:
+            warn(message)
     workers = _workers(config.workers, pipeline)
     if workers > 1:  # loaded once here, the forked workers of every stage inherit the compiled loops
         pipeline.load_kernels()
