@@ -126,8 +126,8 @@ def match(image0: ImageLike, image1: ImageLike, method: str = "slime", **options
 
     Args:
         image0, image1: paths, (H, W[, C]) numpy arrays or torch tensors (grey, RGB or RGBA; 8/16-bit or float).
-        method: a preset: "slime" (default), "slime-upright", "slime-rootsift", "hz+", "hz+-upright",
-            "rootsift", "rootsift-upright".
+        method: a preset of :data:`slime_match.config.PRESETS`: "slime" (default), "slime-upright",
+            "slime-rootsift", "slime-fast", "slime-fine", "hz+", "hz+-upright", "rootsift", "rootsift-upright"...
         **options: flat overrides, e.g. ``descriptor="tfeat"``, ``ransac="fundamental"``, ``threshold=3``,
             ``base="rootsift"``, ``device="cuda"``, ``seed=1``, ``max_side=1600`` (see
             :func:`slime_match.config.make_config`).
