@@ -146,6 +146,19 @@ def test_max_side_shrinks_and_maps_back(pair, tmp_path, capsys):
     assert len(keypoints) > 20 and keypoints[:, 0].max() > 185 and keypoints.max() < 370
 
 
+def test_verbose_logs_stages_as_they_finish(pair, tmp_path, capsys, caplog):
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--scales", "1,2", "-v",
+                           "--no-plot")
+    assert code == 0, err
+    assert "Slime: 8 x 8 blocks (64 block pairs)" in caplog.text
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    for stage in ("features", "block_pairs", "plane_selection", "global_dtm"):
+        assert f"{stage}: " in caplog.text and stage in summary["seconds"]
+    caplog.clear()
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "quiet", "--method", "rootsift", "--no-plot")
+    assert code == 0 and "features: " not in caplog.text
+
+
 def test_viz_bad_input(tmp_path, capsys, pair):
     code, _, err = run_cli(capsys, "viz", tmp_path / "none.npz", *pair, "-o", tmp_path)
     assert code == 2 and "no such stages file" in err

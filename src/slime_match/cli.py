@@ -33,6 +33,8 @@ def _add_match_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="random seed (RANSAC sampling)")
     parser.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"])
     parser.add_argument("--weights-dir", default=None, help="folder with model weights (else TORCH_HOME cache)")
+    parser.add_argument("-v", "--verbose", action="store_true",
+                        help="log each stage as it finishes (seconds) and Slime's block and tile layout")
     parser.add_argument("--max-side", type=int, default=None, metavar="PX",
                         help="shrink images whose longest side is larger to this many px before matching "
                              "(matches come back in original pixels); faster and lighter on large photos")
@@ -211,8 +213,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.debug else logging.WARNING,
-                        format="%(levelname)s: %(message)s")
+    level = logging.DEBUG if args.debug else logging.INFO if getattr(args, "verbose", False) else logging.WARNING
+    logging.basicConfig(level=level, format="%(levelname)s: %(message)s")
+    logging.getLogger("slime_match").setLevel(level)  # also when the root logger was configured before
     try:
         return int(args.func(args) or 0)
     except SlimeMatchError as error:

@@ -2,17 +2,21 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from collections import defaultdict
 from contextlib import contextmanager
 
 import torch
 
+logger = logging.getLogger("slime_match")
+
 
 class StageTimer:
     """Accumulates seconds per named stage; ``with timer("dtm"): ...``.
 
     CUDA work is synchronised at stage boundaries so that the seconds are not attributed to a later stage.
+    Each finished stage is logged at INFO level (``slime match -v`` shows them as progress).
     """
 
     def __init__(self) -> None:
@@ -26,7 +30,9 @@ class StageTimer:
             yield
         finally:
             _sync()
-            self.seconds[stage] += time.perf_counter() - start
+            elapsed = time.perf_counter() - start
+            self.seconds[stage] += elapsed
+            logger.info("%s: %.2f s", stage, elapsed)
 
     def as_dict(self) -> dict[str, float]:
         return {name: round(value, 4) for name, value in self.seconds.items()}

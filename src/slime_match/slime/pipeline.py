@@ -222,6 +222,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         warnings.append(message)
         logger.warning(message)
 
+    logger.info("Slime: %d x %d blocks (%d block pairs), %d and %d tiles", len(blocks0), len(blocks1),
+                len(blocks0) * len(blocks1), len(tiles0), len(tiles1))
     for message in (layout_warning(len(blocks0), len(blocks1)), tile_count_warning(len(tiles0), len(tiles1))):
         if message:
             warn(message)
