@@ -187,8 +187,8 @@ def test_max_side_matches_in_original_pixels():
     config = make_config("slime", scales=(1, 2), max_side=400, **WEIGHT_FREE)
     config.slime.keep_stages = True
     result = Matcher(config)(a, b)
-    sizes = result.summary
-    assert sizes["image_sizes"]["image0"] == [800, 640] and sizes["working_sizes"]["image0"] == [400, 320]
+    summary = result.summary
+    assert summary["image_sizes"]["image0"] == [800, 640] and summary["working_sizes"]["image0"] == [400, 320]
     ok = correct_matches_homography(result.keypoints0, result.keypoints1, np.loadtxt(folder / "H1to3p"))
     assert ok.sum() > 1000 and ok.mean() >= 0.9, (int(ok.sum()), ok.mean())
     assert result.keypoints0.max(axis=0)[0] > 400  # not left in the 400 x 320 working frame
