@@ -44,7 +44,8 @@ def to_original(xy: np.ndarray, scale: tuple[float, float]) -> np.ndarray:
     return (np.asarray(xy, np.float64) + 0.5) * s - 0.5
 
 
-def _to_original_matrix(scale: tuple[float, float]) -> np.ndarray:
+def to_original_matrix(scale: tuple[float, float]) -> np.ndarray:
+    """(3, 3) homogeneous form of :func:`to_original`: resized-frame pixels to original-frame pixels."""
     sx, sy = scale
     return np.array([[sx, 0.0, 0.5 * (sx - 1.0)], [0.0, sy, 0.5 * (sy - 1.0)], [0.0, 0.0, 1.0]])
 
@@ -53,4 +54,4 @@ def homography_to_original(
     H: np.ndarray, scale0: tuple[float, float], scale1: tuple[float, float]
 ) -> np.ndarray:
     """(..., 3, 3) homographies between two resized frames, as homographies between the original frames."""
-    return _to_original_matrix(scale1) @ np.asarray(H, np.float64) @ np.linalg.inv(_to_original_matrix(scale0))
+    return to_original_matrix(scale1) @ np.asarray(H, np.float64) @ np.linalg.inv(to_original_matrix(scale0))

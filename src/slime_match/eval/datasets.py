@@ -24,6 +24,7 @@ import numpy as np
 import scipy.linalg
 
 from slime_match.errors import ConfigError
+from slime_match.resize import to_original_matrix
 
 logger = logging.getLogger("slime_match")
 
@@ -142,14 +143,12 @@ def _require_dir(path: Path | str, what: str) -> Path:
 
 
 # ----------------------------------------------------------------------------------------------------------
-# resizing protocol
+# intrinsics of a protocol-resized frame
 
 
 def scale_intrinsics(K: np.ndarray, scale: tuple[float, float]) -> np.ndarray:
     """(3, 3) intrinsics of the resized frame, given original-frame ``K`` and (sx, sy) = original/resized."""
-    sx, sy = scale
-    S = np.array([[1 / sx, 0, 0.5 / sx - 0.5], [0, 1 / sy, 0.5 / sy - 0.5], [0, 0, 1]])
-    return S @ K
+    return np.linalg.inv(to_original_matrix(scale)) @ K
 
 
 # ----------------------------------------------------------------------------------------------------------
