@@ -43,6 +43,24 @@ def test_rgb_order_is_kept(tmp_path):
     assert load_image(tmp_path / "red.png")[0, 0].tolist() == [1.0, 0.0, 0.0]
 
 
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_exif_orientation_is_applied(tmp_path, orientation):
+    """A photo tagged as rotated/mirrored loads as viewers show it (PIL's exif_transpose as the reference)."""
+    from PIL import Image, ImageOps
+
+    image = np.zeros((40, 60, 3), np.uint8)
+    image[:10, :20] = 255  # an asymmetric mark: top-left, wider than high
+    pil = Image.fromarray(image)
+    exif = pil.getexif()
+    exif[0x0112] = orientation
+    path = tmp_path / "photo.png"  # lossless, so the comparison is exact
+    pil.save(path, exif=exif)
+    expected = np.asarray(ImageOps.exif_transpose(Image.open(path)), dtype=np.float32) / 255.0
+    loaded = load_image(path)
+    assert loaded.shape == expected.shape
+    assert np.array_equal(loaded, expected)
+
+
 def test_tensor_inputs():
     chw = torch.rand(3, 36, 48)
     assert np.allclose(load_image(chw), chw.permute(1, 2, 0).numpy())

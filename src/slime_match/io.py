@@ -25,7 +25,8 @@ def load_image(source: ImageLike) -> np.ndarray:
     Args:
         source: a file path, a numpy array (H, W), (H, W, 1|3|4) of uint8/uint16/float, or a torch tensor
             (C, H, W) or (H, W, C) with C in {1, 3, 4}. Float inputs are assumed in [0, 1] (values above
-            1.5 are taken as 0..255). Grey is replicated to RGB; alpha is dropped.
+            1.5 are taken as 0..255). Grey is replicated to RGB; alpha is dropped. Files are turned upright
+            by their EXIF orientation tag, as image viewers show them (keypoints are in that frame).
 
     Returns:
         (H, W, 3) float32 array in [0, 1].
@@ -57,11 +58,12 @@ def _read_file(path: Path) -> np.ndarray:
     if path.is_dir():
         raise ImageError(f"{path}: is a directory, not an image")
     data = np.fromfile(str(path), dtype=np.uint8)
-    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    # any bit depth and channel count, EXIF orientation applied (IMREAD_UNCHANGED would ignore it)
+    image = cv2.imdecode(data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR) if data.size else None
     if image is None:
         raise ImageError(f"{path}: not a readable image (corrupt file or unsupported format)")
-    if image.ndim == 3:  # OpenCV gives BGR(A)
-        image = cv2.cvtColor(image, cv2.COLOR_BGRA2RGBA if image.shape[2] == 4 else cv2.COLOR_BGR2RGB)
+    if image.ndim == 3:  # OpenCV gives BGR, alpha already dropped
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
     return image
 
 
