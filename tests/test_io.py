@@ -65,6 +65,8 @@ def test_tensor_inputs():
     chw = torch.rand(3, 36, 48)
     assert np.allclose(load_image(chw), chw.permute(1, 2, 0).numpy())
     assert load_image(torch.rand(1, 36, 48)).shape == (36, 48, 3)
+    for half in (torch.bfloat16, torch.float16):  # GPU pipelines often hold images in half precision
+        assert np.allclose(load_image(chw.to(half)), chw.permute(1, 2, 0).numpy(), atol=1e-2)
 
 
 @pytest.mark.parametrize(

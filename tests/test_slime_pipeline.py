@@ -1,6 +1,7 @@
 """Slime orchestration: coordinate frames, flow guide, final merge, and end-to-end runs with exact GT."""
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from slime_match.slime.block_matching import BlockPairMatches, orientation_bin, 
 from slime_match.slime.blocks import make_blocks, make_tiles
 from slime_match.slime.pipeline import (
     MANY_BLOCK_PAIRS,
+    _workers,
     block_planes_to_original,
     empty_result_reason,
     layout_warning,
@@ -251,3 +253,13 @@ def test_empty_slime_result_says_why(graf_small):
     result = Matcher(make_config("slime", scales=(1,), **WEIGHT_FREE))(a, a)
     assert len(result) == 0 and result.summary["counts"]["block_planes"] > 0
     assert any("cannot keep a match" in w for w in result.summary["warnings"]), result.summary["warnings"]
+
+
+def test_cuda_pipelines_never_fork(caplog):
+    """CUDA does not survive fork: a CUDA base runs in one process even when more workers are asked for."""
+    cuda, cpu = SimpleNamespace(device=torch.device("cuda")), SimpleNamespace(device=torch.device("cpu"))
+    assert _workers(None, cuda) == 1
+    with caplog.at_level("WARNING", logger="slime_match"):
+        assert _workers(4, cuda) == 1
+    assert "ignored on CUDA" in caplog.text
+    assert _workers(3, cpu) == 3 and _workers(0, cpu) == 1

@@ -69,6 +69,8 @@ def _read_file(path: Path) -> np.ndarray:
 
 def _tensor_to_hwc(tensor: torch.Tensor) -> np.ndarray:
     array = tensor.detach().cpu()
+    if array.dtype in (torch.bfloat16, torch.float16):  # numpy has no bfloat16
+        array = array.float()
     if array.ndim == 4 and array.shape[0] == 1:
         array = array[0]
     if array.ndim == 3 and array.shape[0] in (1, 3, 4) and array.shape[-1] not in (1, 3, 4):

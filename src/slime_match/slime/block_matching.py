@@ -304,20 +304,22 @@ def describe_fixed_bins(pipeline: BasePipeline, requests: list[tuple[ScaleLevel,
                 tasks.append((level, bin_index, missing))
     tasks.sort(key=lambda task: -len(task[2]))  # the largest first: even loads over the workers
 
-    def describe(k: int) -> np.ndarray:
+    forked = workers > 1
+
+    def describe(k: int) -> np.ndarray | torch.Tensor:
         level, bin_index, missing = tasks[k]
         regions = level.features.subset(torch.from_numpy(missing))
         if level.origin != (0.0, 0.0):
             regions = translate_features(regions, (-level.origin[0], -level.origin[1]))
-        fresh = pipeline.describe_fixed(level.context, regions, bin_index * 2 * math.pi / bins)
-        return fresh.descriptors.detach().cpu().numpy()
+        fresh = pipeline.describe_fixed(level.context, regions, bin_index * 2 * math.pi / bins).descriptors
+        return fresh.detach().cpu().numpy() if forked else fresh.detach()  # no device round trip in-process
 
     for (level, bin_index, missing), fresh in zip(tasks, fork_map(describe, len(tasks), workers, len(tasks))):
         n, device = len(level.features), level.features.laf.device
         computed, descriptors = level.fixed.get(bin_index, (np.zeros(n, bool), None))
         if descriptors is None:
             descriptors = torch.zeros(n, fresh.shape[1], device=device)
-        descriptors[torch.from_numpy(missing).to(device)] = torch.from_numpy(fresh).to(device)
+        descriptors[torch.from_numpy(missing).to(device)] = torch.as_tensor(fresh, device=device)
         computed = computed.copy()
         computed[missing] = True
         level.fixed[bin_index] = (computed, descriptors)

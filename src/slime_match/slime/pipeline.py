@@ -180,11 +180,15 @@ def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks
 
 
 def _workers(requested: int | None, pipeline: BasePipeline) -> int:
-    """Worker processes for the block pairs: CUDA work stays in one process (CUDA does not survive fork)."""
-    if requested is not None:
-        return max(1, requested)
+    """Worker processes for the block pairs: CUDA work stays in one process (CUDA does not survive fork),
+    even when more were requested."""
     device = getattr(pipeline, "device", None)
-    return 1 if device is not None and device.type == "cuda" else max(1, os.cpu_count() or 1)
+    if device is not None and device.type == "cuda":
+        if requested is not None and requested > 1:
+            logger.warning("workers=%d ignored on CUDA: forked processes cannot use CUDA, Slime runs in one",
+                           requested)
+        return 1
+    return max(1, requested) if requested is not None else max(1, os.cpu_count() or 1)
 
 
 def select_planes(table: MatchTable, expanded, tiles0: list[Block], tiles1: list[Block], config: TileConfig
