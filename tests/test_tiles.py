@@ -18,6 +18,7 @@ from slime_match.slime.tiles import (
     fuse_planes,
     global_orientation_filter,
     greedy_two_per_tile,
+    plane_groups,
     tile_sets,
 )
 
@@ -163,6 +164,27 @@ def test_greedy_two_per_tile_skips_near_copies_of_one_plane():
     ts = _sets(rows, 40, tile0=[0, 0, 0, 0], tile1=[1, 1, 2, 3])
     assert greedy_two_per_tile(ts).tolist() == [0, 1]
     assert greedy_two_per_tile(ts, t_ov=1 / 3).tolist() == [0, 2]
+
+
+def test_plane_groups_shared_and_iou():
+    # plane 0: matches 0..9 in two sets of different tile pairs; plane 1: 5..12; plane 2: 8..30
+    rows = [range(6), range(4, 10), range(5, 13), range(8, 31)]
+    ts = _sets(rows, 40, tile0=[0, 1, 0, 2], tile1=[0, 1, 0, 2], plane=np.array([0, 0, 1, 2]))
+    # shared: 2 heads (largest); it shares 5 of plane 1's 8 matches (> 1/3); plane 0 shares 2/10 with it
+    assert plane_groups(ts, 1 / 3, "shared").tolist() == [0, 2, 2]
+    # IoU: plane 2 / plane 1 = 5/26, plane 0 / plane 1 = 5/13 > 1/3
+    assert plane_groups(ts, 1 / 3, "iou").tolist() == [0, 0, 2]
+    assert plane_groups(ts, 0.9, "shared").tolist() == [0, 1, 2]
+
+
+def test_greedy_two_per_tile_counts_homographies_not_sets():
+    # tile 0 of image 1 meets one plane through three tile pairs (sets 0, 1, 2), then plane 1 and plane 2
+    rows = [range(10), range(10, 19), range(19, 27), range(30, 37), range(40, 46)]
+    ts = _sets(rows, 50, tile0=[0, 0, 0, 0, 0], tile1=[1, 2, 3, 4, 5], plane=np.array([0, 0, 0, 1, 2]))
+    assert greedy_two_per_tile(ts).tolist() == [0, 1]  # literal: every set takes a slot
+    assert greedy_two_per_tile(ts, groups=np.arange(3)).tolist() == [0, 1, 2, 3]  # plane 0 holds one slot
+    # planes 1 and 2 grouped (near-copies): the third plane fits as well
+    assert greedy_two_per_tile(ts, groups=np.array([0, 1, 1])).tolist() == [0, 1, 2, 3, 4]
 
 
 def test_fuse_planes_by_iou():

@@ -96,7 +96,8 @@ def make_config(preset: str = "slime", **options: Any) -> MatchConfig:
 
     Flat keys are looked up on MatchConfig, then BaseConfig (``descriptor``, ``shape``, ``upright``...),
     then SlimeConfig; ``base="rootsift"`` (or "keynet") selects the base pipeline and ``scales=(1, 2)`` sets
-    the Slime block scales. Unknown keys raise ConfigError.
+    the Slime block scales, ``same_homography="set"`` F-bar's literal two sets per tile (see
+    ``TileConfig``). Unknown keys raise ConfigError.
     """
     if preset not in PRESETS:
         raise ConfigError(f"unknown method/preset {preset!r}: choose one of {', '.join(PRESETS)}")
@@ -107,6 +108,8 @@ def make_config(preset: str = "slime", **options: Any) -> MatchConfig:
             config.base.name = value
         elif key == "scales":
             config.slime.blocks = dataclasses.replace(config.slime.blocks, scales=tuple(value))
+        elif key == "same_homography":
+            config.slime.tiles = dataclasses.replace(config.slime.tiles, same_homography=value)
         elif key in ("base", "slime") and dataclasses.is_dataclass(value):
             setattr(config, key, copy.deepcopy(value))
         elif _has_field(config, key) and key not in ("base", "slime"):

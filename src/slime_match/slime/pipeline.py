@@ -41,6 +41,7 @@ from .tiles import (
     fuse_planes,
     global_orientation_filter,
     greedy_two_per_tile,
+    plane_groups,
     tile_sets,
 )
 
@@ -201,7 +202,9 @@ def select_planes(table: MatchTable, expanded, tiles0: list[Block], tiles1: list
     keep = epipolar_consistency(table, superset, t_perp=config.t_perp, t_xi=config.t_xi,
                                 min_union=config.min_union, chunk=config.chunk)
     filtered = superset.restrict(keep)
-    fbar = filtered.subset(greedy_two_per_tile(filtered, w, t_ov=config.t_ov))
+    groups = None if config.same_homography == "set" else plane_groups(filtered, config.t_ov,
+                                                                         config.same_homography)
+    fbar = filtered.subset(greedy_two_per_tile(filtered, w, t_ov=config.t_ov, groups=groups))
     fused = fuse_planes(sets.restrict(keep), fbar, w, t_ov=config.t_ov)
     ok, theta, theta_plus = global_orientation_filter(table, fused, bins=config.bins,
                                                       t_theta_plus=config.t_theta_plus)

@@ -9,7 +9,7 @@ The Slime flow is::
     sup = star.subset(best_sets_per_tile(star, w))                # H    (q = 4 per tile, both images)
     keep = epipolar_consistency(table, sup)                       # M+
     filt = sup.restrict(keep)                                     # F^l_v = H^l_v & M+
-    fbar = filt.subset(greedy_two_per_tile(filt, w))              # F-bar
+    fbar = filt.subset(greedy_two_per_tile(filt, w, groups=plane_groups(filt, 1 / 3)))  # F-bar
     fused = fuse_planes(sets.restrict(keep), fbar, w)             # F^{l*}_v
     ok, theta, theta_plus = global_orientation_filter(table, fused)
     final = fused.subset(ok)                                      # F^theta
@@ -40,10 +40,14 @@ __all__ = [
     "fuse_planes",
     "global_orientation_filter",
     "greedy_two_per_tile",
+    "plane_groups",
     "tile_sets",
 ]
 
 log = logging.getLogger("slime_match")
+
+
+_SAME_HOMOGRAPHY = ("shared", "iou", "set")
 
 
 @dataclass
@@ -58,6 +62,9 @@ class TileConfig:
         min_union: F_dd' is estimated only from unions with at least this many distinct matches (the
             8-point algorithm is underdetermined below 8; such pairs vote for nothing).
         t_ov: IoU above which two sets of the same tile pair are fused.
+        same_homography: when sets of different planes count as one homography for F-bar's two per tile:
+            "shared" (planes sharing more than t_ov of the smaller one's matches), "iou" (planes with IoU
+            > t_ov) or "set" (never: every set takes a slot, the literal reading); see ``plane_groups``.
         bins: orientation histogram bins.
         t_theta_plus: tolerance to the global orientation, radians (pi/4).
         chunk: (F, match) pairs evaluated at once in the epipolar vote.
@@ -69,6 +76,7 @@ class TileConfig:
     t_xi: float = 9.0
     min_union: int = 8
     t_ov: float = 1.0 / 3.0
+    same_homography: str = "shared"
     bins: int = 16
     t_theta_plus: float = math.pi / 4.0
     chunk: int = 4_000_000
@@ -78,6 +86,9 @@ class TileConfig:
             raise ConfigError("TileConfig: q_pair, q_tile, bins, chunk must be >= 1 and min_union >= 8")
         if self.t_perp <= 0 or self.t_xi < 0 or not 0 <= self.t_ov < 1 or self.t_theta_plus <= 0:
             raise ConfigError("TileConfig: need t_perp > 0, t_xi >= 0, 0 <= t_ov < 1, t_theta_plus > 0")
+        if self.same_homography not in _SAME_HOMOGRAPHY:
+            raise ConfigError(f"TileConfig: same_homography {self.same_homography!r} is not one of "
+                              f"{', '.join(_SAME_HOMOGRAPHY)}")
 
 
 _D = TileConfig()  # defaults for the function signatures
@@ -427,16 +438,57 @@ def epipolar_consistency(
     return keep
 
 
+def plane_groups(sets: TileSets, overlap: float, measure: str = "shared") -> np.ndarray:
+    """Planes that are one homography: each plane's matches are the union of its sets, and from the largest
+    plane down, each plane not yet grouped heads a group and takes the ungrouped planes whose matches overlap
+    its own by more than ``overlap``.
+
+    Args:
+        sets: tile sets with their planes l.
+        overlap: threshold on the overlap of two planes' match sets A, B (t_ov = 1/3).
+        measure: "shared" (|A & B| / min(|A|, |B|)) or "iou" (|A & B| / |A | B|).
+
+    Returns:
+        (L,) int64 group of each plane l (the index of the group's largest plane), L = max plane + 1.
+    """
+    n_planes = int(sets.plane.max(initial=-1)) + 1
+    entries = sp.csr_matrix((np.ones(len(sets.indices)), (sets.plane[sets.set_of_entry], sets.indices)),
+                            shape=(n_planes, sets.n_matches))
+    entries.sum_duplicates()
+    entries.data[:] = 1.0  # a match in several sets of one plane counts once
+    size = np.asarray(entries.sum(axis=1)).ravel()
+    inter = (entries @ entries.T).tocoo()
+    i, j, v = inter.row, inter.col, inter.data
+    scale = np.minimum(size[i], size[j]) if measure == "shared" else size[i] + size[j] - v
+    near = (v / np.maximum(scale, 1e-12)) > overlap
+    near = sp.csr_matrix((np.ones(int(near.sum()), bool), (i[near], j[near])), shape=(n_planes, n_planes))
+    group = np.arange(n_planes)
+    grouped = np.zeros(n_planes, bool)
+    for head in np.argsort(-size, kind="stable"):  # sequential by definition; one step per plane
+        if grouped[head]:
+            continue
+        members = near.indices[near.indptr[head]:near.indptr[head + 1]]
+        members = members[~grouped[members]]
+        group[members] = head
+        grouped[members] = grouped[head] = True
+    return group
+
+
 def greedy_two_per_tile(
-    sets: TileSets, weights: np.ndarray | None = None, max_per_tile: int = 2, t_ov: float | None = None
+    sets: TileSets, weights: np.ndarray | None = None, max_per_tile: int = 2, t_ov: float | None = None,
+    groups: np.ndarray | None = None,
 ) -> np.ndarray:
     """F-bar: sets by decreasing cardinality, each added unless one of its tiles (c in image 1 or c' in
-    image 2) is already shared by ``max_per_tile`` added sets; empty sets are skipped (paper Sec. 3.6).
+    image 2) would then hold more than ``max_per_tile`` homographies; empty sets are skipped (paper Sec. 3.6).
+
+    Without ``groups`` each set is a homography of its own (the literal reading: "at maximum only two sets
+    in F-bar can share the same tile"). With ``groups`` ((L,) group of each plane, see ``plane_groups``) the
+    sets of one group are one homography, so a plane that spans several tile pairs of a tile, or its
+    near-copies from overlapping block pairs, take one of the tile's slots and not all of them ("no tile has
+    more than two homographies, the background and foreground planes").
 
     With ``t_ov``, a set overlapping an added set of the same tile pair by IoU > t_ov is the same plane
-    (the fusion of Sec. 3.7 merges them anyway): it is skipped without taking a tile's slot, so that the
-    two slots of a tile go to two different planes (background and foreground) and not to near-copies of
-    one plane found by overlapping block pairs.
+    (the fusion of Sec. 3.7 merges them anyway): it is skipped without taking a tile's slot.
 
     Returns:
         Indices of the added sets, in the order they were added.
@@ -444,18 +496,19 @@ def greedy_two_per_tile(
     size = sets.sizes(weights)
     order = np.argsort(-size, kind="stable")
     order = order[size[order] > 0]
-    used0 = np.zeros(int(sets.tile0.max(initial=-1)) + 1, np.int64)
-    used1 = np.zeros(int(sets.tile1.max(initial=-1)) + 1, np.int64)
+    homography = np.arange(len(sets)) if groups is None else np.asarray(groups)[sets.plane]
+    held0: list[set] = [set() for _ in range(int(sets.tile0.max(initial=-1)) + 1)]
+    held1: list[set] = [set() for _ in range(int(sets.tile1.max(initial=-1)) + 1)]
     same_plane = _near_copies(sets, weights, t_ov) if t_ov is not None else None
     added = np.zeros(len(sets), bool)
     out = []
     for s in order:  # sequential by definition; one step per set, not per match
         if same_plane is not None and added[same_plane.indices[same_plane.indptr[s]:same_plane.indptr[s + 1]]].any():
             continue
-        c0, c1 = sets.tile0[s], sets.tile1[s]
-        if used0[c0] < max_per_tile and used1[c1] < max_per_tile:
-            used0[c0] += 1
-            used1[c1] += 1
+        h, tile0, tile1 = homography[s], held0[sets.tile0[s]], held1[sets.tile1[s]]
+        if (h in tile0 or len(tile0) < max_per_tile) and (h in tile1 or len(tile1) < max_per_tile):
+            tile0.add(h)
+            tile1.add(h)
             added[s] = True
             out.append(s)
     return np.asarray(out, np.int64)
