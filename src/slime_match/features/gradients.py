@@ -213,9 +213,11 @@ class DominantGradientOrientation:
         return torch.from_numpy(hist)
 
     def _torch_histograms(self, patches: torch.Tensor) -> torch.Tensor:
-        """:meth:`_histograms` by whole-batch torch operations."""
-        n = patches.shape[0]
+        """:meth:`_histograms` by whole-batch torch operations. The votes are summed by a one-hot product, not
+        ``scatter_add_``, whose CUDA atomics add in a varying order (orientations would change run to run)."""
         b0, b1, w0, w1 = _orientation_votes(*patch_gradients(patches, "sobel"), self.bins, self.eps, math.pi)
         window = self.window.to(patches.device, patches.dtype)
-        hist = torch.zeros(n, self.bins, device=patches.device, dtype=patches.dtype)
-        return hist.scatter_add_(1, b0, w0 * window).scatter_add_(1, b1, w1 * window)
+        one_hot0 = F.one_hot(b0, self.bins).to(patches.dtype)
+        one_hot1 = F.one_hot(b1, self.bins).to(patches.dtype)
+        return (torch.einsum("nk,nkb->nb", w0 * window, one_hot0)
+                + torch.einsum("nk,nkb->nb", w1 * window, one_hot1))
