@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
+from PIL import Image, ImageOps
 
 from slime_match.errors import ImageError
 from slime_match.io import load_image, save_json, save_npz
@@ -46,8 +47,6 @@ def test_rgb_order_is_kept(tmp_path):
 @pytest.mark.parametrize("orientation", range(1, 9))
 def test_exif_orientation_is_applied(tmp_path, orientation):
     """A photo tagged as rotated/mirrored loads as viewers show it (PIL's exif_transpose as the reference)."""
-    from PIL import Image, ImageOps
-
     image = np.zeros((40, 60, 3), np.uint8)
     image[:10, :20] = 255  # an asymmetric mark: top-left, wider than high
     pil = Image.fromarray(image)
