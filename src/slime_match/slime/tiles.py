@@ -454,8 +454,7 @@ def plane_groups(sets: TileSets, overlap: float, measure: str = "shared") -> np.
     n_planes = int(sets.plane.max(initial=-1)) + 1
     entries = sp.csr_matrix((np.ones(len(sets.indices)), (sets.plane[sets.set_of_entry], sets.indices)),
                             shape=(n_planes, sets.n_matches))
-    entries.sum_duplicates()
-    entries.data[:] = 1.0  # a match in several sets of one plane counts once
+    entries.data[:] = 1.0  # duplicates were summed on construction: a match in several sets of one plane counts once
     size = np.asarray(entries.sum(axis=1)).ravel()
     inter = (entries @ entries.T).tocoo()
     i, j, v = inter.row, inter.col, inter.data
