@@ -52,6 +52,7 @@ import numpy as np
 import torch
 from kornia.feature import PatchDominantGradientOrientation, SIFTDescriptor
 
+from slime_match.eval.code_version import code_version
 from slime_match.features.gradients import DominantGradientOrientation, SIFTPatchDescriptor
 from slime_match.features.harrisz import detect_harrisz
 from slime_match.features.inference import fuse_for_inference
@@ -426,6 +427,7 @@ def main(argv: list[str] | None = None) -> dict:
     report: dict[str, Any] = {
         "meta": {
             "date": datetime.now(UTC).isoformat(timespec="seconds"),
+            "code_version": code_version(),
             "command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
             "device": str(device) if device.type == "cpu" else torch.cuda.get_device_name(device),
             "cpu_count": os.cpu_count(),

@@ -60,6 +60,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from slime_match.config import make_config
+from slime_match.eval.code_version import code_version
 from slime_match.eval.metrics import DEFAULTS, correct_matches_homography, coverage, valid_area_homography
 from slime_match.io import load_image
 from slime_match.matcher import Matcher
@@ -264,6 +265,7 @@ def main(argv: list[str] | None = None) -> dict:
     report: dict[str, Any] = {
         "meta": {
             "date": datetime.now(UTC).isoformat(timespec="seconds"),
+            "code_version": code_version(),
             "command": " ".join([Path(sys.argv[0]).name, *(argv if argv is not None else sys.argv[1:])]),
             "device": "cpu" if args.device == "cpu" else torch.cuda.get_device_name(0),
             "cpu_count": os.cpu_count(),
