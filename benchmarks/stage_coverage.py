@@ -14,13 +14,17 @@ Per pair (raw matches, correct = two-sided error < 15 px, the paper's coverage: 
   ``ftheta`` (fused, orientation-filtered F^theta), ``tile_matches`` (Sec. 3.8 before the global DTM),
   ``dtm_input`` (the global DTM's input: F^theta and the tile matches, exact duplicates merged), ``final``.
 A stage whose coverage falls well below the previous one is where area is lost.
+
+``--global-dtm-variants "inside_tolerance=4;cluster_radius=2"`` adds, per variant, an entry
+``final[<variant>]``: the global DTM (``refine.global_dtm``) rerun on the same pair's input with those DTM
+fields (``DTMConfig``) or representative-cluster radius changed.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +39,9 @@ from slime_match.features.harrisz import detect_harrisz
 from slime_match.geometry.homography import project
 from slime_match.io import load_image, to_tensor
 from slime_match.matcher import Matcher
+from slime_match.matching.dtm import DTMConfig
 from slime_match.resize import resize_image, to_original
+from slime_match.slime.refine import CLUSTER_RADIUS, global_dtm, merge_duplicates
 
 STAGES = ("block_matches", "expanded", "superset", "epipolar", "fbar", "ftheta", "tile_matches", "dtm_input",
           "final")
@@ -67,24 +73,48 @@ def stage_matches(stages: dict[str, np.ndarray]) -> dict[str, tuple[np.ndarray, 
         return t0[index], t1[index]
 
     superset = np.unique(stages["superset_indices"])
-    ftheta = rows(np.unique(stages["ftheta_indices"]))
-    union = np.unique(np.hstack([np.vstack([ftheta[0], stages["tile_matches_xy0"]]),
-                                 np.vstack([ftheta[1], stages["tile_matches_xy1"]])]), axis=0)
+    dtm_input = merge_duplicates(stages["dtm_input_xy0"], stages["dtm_input_xy1"], stages["dtm_input_score"])
     return {
         "block_matches": (t0, t1),
         "expanded": rows(np.unique(stages["expanded_match"])),
         "superset": rows(superset),
         "epipolar": rows(superset[stages["epipolar_keep"][superset]]),
         "fbar": rows(np.unique(stages["fbar_indices"])),
-        "ftheta": ftheta,
+        "ftheta": rows(np.unique(stages["ftheta_indices"])),
         "tile_matches": (stages["tile_matches_xy0"], stages["tile_matches_xy1"]),
-        "dtm_input": (union[:, :2], union[:, 2:]),
+        "dtm_input": dtm_input[:2],
         "final": (stages["final_xy0"], stages["final_xy1"]),
     }
 
 
-def pair_row(pair, slime: Matcher, base: Matcher) -> dict[str, dict[str, float]]:
-    """{entry: {matches, correct, precision, coverage}} for the bound, Hz+ and every Slime stage."""
+def parse_dtm_variant(spec: str) -> tuple[dict[str, float], float]:
+    """``"inside_tolerance=4,cluster_radius=2"`` -> ({DTMConfig field: value}, cluster radius in px)."""
+    names = {f.name for f in fields(DTMConfig)}
+    options: dict[str, float] = {}
+    radius = CLUSTER_RADIUS
+    for item in filter(None, (part.strip() for part in spec.split(","))):
+        key, _, value = item.partition("=")
+        if key == "cluster_radius":
+            radius = float(value)
+        elif key in names:
+            options[key] = type(getattr(DTMConfig(), key))(value)
+        else:
+            raise SystemExit(f"--global-dtm-variants: unknown field {key!r} (cluster_radius or one of {sorted(names)})")
+    return options, radius
+
+
+def dtm_variant_matches(stages: dict[str, np.ndarray], sizes, dtm: DTMConfig, spec: str
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """The global DTM rerun on a result's input (``stages["dtm_input_*"]``) with the variant ``spec``."""
+    options, radius = parse_dtm_variant(spec)
+    xy0, xy1, _ = global_dtm(stages["dtm_input_xy0"], stages["dtm_input_xy1"], stages["dtm_input_score"], *sizes,
+                             replace(dtm, **options), radius)
+    return xy0, xy1
+
+
+def pair_row(pair, slime: Matcher, base: Matcher, dtm_variants: list[str] = ()) -> dict[str, dict[str, float]]:
+    """{entry: {matches, correct, precision, coverage}} for the bound, Hz+, every Slime stage and every global
+    DTM variant."""
     image0, image1 = load_image(pair.image0), load_image(pair.image1)
     valid0, valid1 = valid_area_homography(pair.H, image0.shape[:2], image1.shape[:2], pair.mask0, pair.mask1)
     (a, s0), (b, s1) = (resize_image(im, pair.max_side, pair.size) for im in (image0, image1))
@@ -103,6 +133,9 @@ def pair_row(pair, slime: Matcher, base: Matcher) -> dict[str, dict[str, float]]
     result = slime(a, b)
     for name, (x0, x1) in stage_matches(result.stages).items():
         row[name] = score(x0, x1)
+    for spec in dtm_variants:
+        row[f"final[{spec}]"] = score(*dtm_variant_matches(result.stages, (a.shape[:2], b.shape[:2]),
+                                                           slime.pipeline.config.dtm, spec))
     return row
 
 
@@ -116,8 +149,14 @@ def main() -> None:
                              "detection=scale,tile_detection=block")
     parser.add_argument("--scales", type=parse_scales, default=None,
                         help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper)")
+    parser.add_argument("--global-dtm-variants", default="",
+                        help="';'-separated global DTM variants to add, each 'field=value,...' with DTMConfig "
+                             "fields or cluster_radius, e.g. 'inside_tolerance=4;cluster_radius=2'")
     parser.add_argument("--out", type=Path, default=Path("results/stage_coverage.json"))
     args = parser.parse_args()
+    dtm_variants = [v.strip() for v in args.global_dtm_variants.split(";") if v.strip()]
+    for spec in dtm_variants:
+        parse_dtm_variant(spec)  # bad names stop before any work
     slime_options = parse_method_spec(f"slime:{args.slime_options}")[1]
     if args.scales:
         slime_options["scales"] = args.scales
@@ -132,7 +171,7 @@ def main() -> None:
                 raise SystemExit(f"{spec}: {pair.name} has no ground-truth homography (planar datasets only)")
             variants = [pair] + [rotated_pair(replace(pair, image1=load_image(pair.image1)), a) for a in angles]
             for p in variants:
-                rows[f"{spec}/{p.name}"] = row = pair_row(p, slime, base)
+                rows[f"{spec}/{p.name}"] = row = pair_row(p, slime, base, dtm_variants)
                 print(f"{spec}/{p.name}: " + ", ".join(f"{k} {v['coverage']:.3f}" for k, v in row.items()), flush=True)
     if not rows:
         raise SystemExit(f"no pair in {args.datasets}")
@@ -141,10 +180,10 @@ def main() -> None:
             for k in entries}
     print(f"\nmean over {len(rows)} pairs (coverage / precision):")
     for k, v in mean.items():
-        print(f"  {k:14s} {v['coverage']:.3f} / {v['precision']:.3f}")
+        print(f"  {k:14s} {v['coverage']:.4f} / {v['precision']:.4f}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"descriptor": args.descriptor, "slime_options": slime_options,
-                                    "pairs": rows, "mean": mean}, indent=1))
+                                    "global_dtm_variants": dtm_variants, "pairs": rows, "mean": mean}, indent=1))
     print(f"written {args.out}")
 
 

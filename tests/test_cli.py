@@ -8,6 +8,7 @@ import pytest
 from conftest import run_cli
 
 from slime_match.cli import main
+from slime_match.slime.refine import global_dtm
 
 WEIGHT_FREE = ["--shape", "baumberg", "--orientation", "gradient", "--descriptor", "rootsift"]
 
@@ -54,6 +55,9 @@ def test_slime_stages_and_viz(pair, tmp_path, capsys):
     assert {"block_pairs", "expansion", "plane_selection", "global_dtm"} <= set(summary["seconds"])
     stages = np.load(tmp_path / "stages.npz")
     assert stages["final_xy0"].shape == (summary["counts"]["matches"], 2)
+    sizes = [tuple(summary["image_sizes"][f"image{i}"][::-1]) for i in (0, 1)]  # (H, W)
+    rerun = global_dtm(stages["dtm_input_xy0"], stages["dtm_input_xy1"], stages["dtm_input_score"], *sizes)
+    np.testing.assert_array_equal(rerun[0], stages["final_xy0"])  # the global DTM's input is saved whole
     code, _out, err = run_cli(capsys, "viz", tmp_path / "stages.npz", *pair, "-o", tmp_path / "viz")
     assert code == 0, err
     assert {p.name for p in (tmp_path / "viz").iterdir()} == {

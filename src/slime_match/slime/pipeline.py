@@ -293,7 +293,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     stages = None
     if config.keep_stages:
         stages = _stage_arrays(blocks0, blocks1, tiles0, tiles1, bpm, raw_table, table, h, expanded, selected,
-                               tile_xy0, tile_xy1, xy0, xy1)
+                               tile_xy0, tile_xy1, (all0, all1, all_scores), xy0, xy1)
     return SlimeOutput(xy0, xy1, scores, counts, stages, warnings)
 
 
@@ -331,8 +331,9 @@ def _sets_arrays(prefix: str, sets: TileSets) -> dict[str, np.ndarray]:
 
 
 def _stage_arrays(blocks0, blocks1, tiles0, tiles1, bpm, raw_table, table, h, expanded, selected, tile_xy0,
-                  tile_xy1, xy0, xy1) -> dict[str, np.ndarray]:
-    """Every stage's sets as flat arrays (match sets index the rows of ``table_*``)."""
+                  tile_xy1, dtm_input, xy0, xy1) -> dict[str, np.ndarray]:
+    """Every stage's sets as flat arrays (match sets index the rows of ``table_*``); ``dtm_input`` = the
+    global DTM's input (F^theta's matches, then the tile matches) as xy0 (K, 2), xy1 (K, 2), scores (K,)."""
     coo = expanded.tocoo()
     out = {
         "blocks0": _boxes_original(blocks0), "blocks1": _boxes_original(blocks1),
@@ -344,7 +345,9 @@ def _stage_arrays(blocks0, blocks1, tiles0, tiles1, bpm, raw_table, table, h, ex
         "expanded_plane": coo.row.astype(np.int64), "expanded_match": coo.col.astype(np.int64),
         "epipolar_keep": selected["keep"], "ftheta_theta": selected["theta"],
         "theta_plus": np.array(selected["theta_plus"]),
-        "tile_matches_xy0": tile_xy0, "tile_matches_xy1": tile_xy1, "final_xy0": xy0, "final_xy1": xy1,
+        "tile_matches_xy0": tile_xy0, "tile_matches_xy1": tile_xy1,
+        "dtm_input_xy0": dtm_input[0], "dtm_input_xy1": dtm_input[1], "dtm_input_score": dtm_input[2],
+        "final_xy0": xy0, "final_xy1": xy1,
     }
     for name in ("superset", "fbar", "ftheta"):
         out.update(_sets_arrays(name, selected[name]))

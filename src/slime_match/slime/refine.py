@@ -143,7 +143,8 @@ def cluster_representatives(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray
 
 
 def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size1,
-               config: DTMConfig | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               config: DTMConfig | None = None, cluster_radius: float = CLUSTER_RADIUS
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Final DTM on the union of tile and F^theta matches.
 
     Exact duplicate matches are merged first. Overlapping blocks and tiles leave clusters of matches a few
@@ -159,13 +160,17 @@ def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size
     keypoints collapsed graf 1 -> 6 rotated by 45 deg from 2312 correct input matches to 248 kept (1409
     uncarved); over the 15 planar pairs it cost 0.007 coverage.
 
+    Args:
+        xy0, xy1: (K, 2) match ends in px; scores: (K,) lower is better; size0, size1: (H, W) image sizes.
+        config: the DTM's parameters (the base pipeline's); cluster_radius: px, see ``cluster_representatives``.
+
     Returns:
         xy0, xy1 (K, 2) and scores (K,) of the kept matches, sorted by score.
     """
     if len(xy0) == 0:
         return xy0, xy1, scores
     xy0, xy1, scores = merge_duplicates(xy0, xy1, scores)
-    rep, cluster = cluster_representatives(xy0, xy1, scores)
+    rep, cluster = cluster_representatives(xy0, xy1, scores, cluster_radius)
     keep = dtm_filter(xy0[rep], xy1[rep], scores[rep], size0, size1, config=config).keep[cluster]
     order = np.argsort(scores[keep], kind="stable")
     return xy0[keep][order], xy1[keep][order], scores[keep][order]
