@@ -332,8 +332,9 @@ def _sets_arrays(prefix: str, sets: TileSets) -> dict[str, np.ndarray]:
 
 def _stage_arrays(blocks0, blocks1, tiles0, tiles1, bpm, raw_table, table, h, expanded, selected, tile_xy0,
                   tile_xy1, dtm_input, xy0, xy1) -> dict[str, np.ndarray]:
-    """Every stage's sets as flat arrays (match sets index the rows of ``table_*``); ``dtm_input`` = the
-    global DTM's input (F^theta's matches, then the tile matches) as xy0 (K, 2), xy1 (K, 2), scores (K,)."""
+    """Every stage's sets as flat arrays (match sets index the rows of ``table_*``); ``dtm_input`` = the last
+    step's input, F^theta's matches then the tile matches, as xy0 (K, 2), xy1 (K, 2), scores (K,) (the global
+    DTM's input where it runs)."""
     coo = expanded.tocoo()
     out = {
         "blocks0": _boxes_original(blocks0), "blocks1": _boxes_original(blocks1),
