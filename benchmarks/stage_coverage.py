@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Sequence
 from dataclasses import fields, replace
 from pathlib import Path
 
@@ -112,7 +113,7 @@ def dtm_variant_matches(stages: dict[str, np.ndarray], sizes, dtm: DTMConfig, sp
     return xy0, xy1
 
 
-def pair_row(pair, slime: Matcher, base: Matcher, dtm_variants: list[str] = ()) -> dict[str, dict[str, float]]:
+def pair_row(pair, slime: Matcher, base: Matcher, dtm_variants: Sequence[str] = ()) -> dict[str, dict[str, float]]:
     """{entry: {matches, correct, precision, coverage}} for the bound, Hz+, every Slime stage and every global
     DTM variant."""
     image0, image1 = load_image(pair.image0), load_image(pair.image1)
