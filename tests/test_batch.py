@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from conftest import run_cli
 
-from slime_match.batch import _interrupted, read_pairs
+from slime_match.batch import _interrupted, match_pairs, read_pairs
+from slime_match.config import make_config
 from slime_match.errors import ConfigError, ImageError
 
 FAST = ["--method", "rootsift"]  # the base RootSIFT alone: the run logic, not the matcher, is under test
@@ -125,3 +126,14 @@ def test_pairs_workers_give_the_same_matches(images, tmp_path, capsys):
         assert np.array_equal(a["keypoints1"], b["keypoints1"])
     summary = json.loads((runs[2] / "left.png__right.png" / "summary.json").read_text())
     assert summary["config"]["slime"]["workers"] == max(1, (os.cpu_count() or 1) // 2)  # no oversubscription
+
+
+def test_pool_workers_may_fork_slime_workers(images, tmp_path):
+    """Two pool workers, each running Slime with two forked workers of its own (what a machine of four cores or
+    more, or a GPU machine, gives by default): pool workers must be able to have children."""
+    config = make_config("slime", scales=(1,), workers=2, shape="baumberg", orientation="gradient",
+                         descriptor="rootsift")
+    jobs = read_pairs(_pairs_file(tmp_path, "left.png right.png\nright.png left.png\n"), images)
+    records = match_pairs(config, jobs, tmp_path / "run", workers=2)
+    assert [r["status"] for r in records] == ["done", "done"], records
+    assert all(r["matches"] > 100 for r in records)

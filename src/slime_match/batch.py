@@ -18,7 +18,7 @@ import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
-from multiprocessing import get_context
+from multiprocessing.context import SpawnContext, SpawnProcess
 from pathlib import Path
 from typing import Any
 
@@ -226,15 +226,15 @@ def _interrupted(error: BaseException) -> bool:
 def _match_in_pool(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool, workers: int
                    ) -> Iterator[tuple[int, dict[str, Any]]]:
     """(index, record) of the ``todo`` pairs as they finish in ``workers`` spawned processes, each with a
-    Matcher of ``matcher``'s configuration and an equal share of the CPU cores (torch threads and, on CPU,
-    Slime's own forked workers). On an interruption the workers are stopped at once (a pair's files are
+    Matcher of ``matcher``'s configuration and an equal share of the CPU cores (torch threads and Slime's own
+    forked workers). On an interruption the workers are stopped at once (a pair's files are
     written all or nothing)."""
     share = max(1, (os.cpu_count() or 1) // workers)
     config = copy.deepcopy(matcher.config)
-    if config.slime.workers is None and matcher.device.type == "cpu":  # CUDA work stays unforked
+    if config.slime.workers is None:
         config.slime.workers = share
     tasks = [(index, jobs[index], out, plot) for index in todo]
-    pool = get_context("spawn").Pool(workers, initializer=_init_worker, initargs=(config, share))
+    pool = _ParentContext().Pool(workers, initializer=_init_worker, initargs=(config, share))
     try:  # spawn, not fork: a forked copy of the parent's torch and OpenMP thread pools can deadlock
         yield from pool.imap_unordered(_match_in_worker, tasks)
         pool.close()
@@ -243,6 +243,23 @@ def _match_in_pool(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: 
         raise
     finally:
         pool.join()
+
+
+class _ParentProcess(SpawnProcess):
+    """A spawned pool worker that is not daemonic, so that Slime in it can fork its own workers (a daemonic
+    process cannot have children). The pool still terminates it on an interruption."""
+
+    @property
+    def daemon(self) -> bool:
+        return False
+
+    @daemon.setter
+    def daemon(self, value: bool) -> None:
+        pass
+
+
+class _ParentContext(SpawnContext):
+    Process = _ParentProcess
 
 
 _WORKER_MATCHER = None
