@@ -1,6 +1,7 @@
 """Slime block levels: one detection per scale, per block (the paper's prototype), or per block with the shared
 keypoints of overlapping blocks merged and described once."""
 
+import copy
 import dataclasses
 
 import cv2
@@ -23,6 +24,7 @@ from slime_match.slime.block_matching import (
     describe_fixed_bins,
     fixed_features,
     fork_map,
+    match_jobs,
     merge_keypoints,
     ransac_batches,
     translate_features,
@@ -186,6 +188,24 @@ def test_forked_detections_equal_one_process(levels):
         assert a.origin == b.origin and all(np.array_equal(x, y) for x, y in zip(a.members, b.members, strict=True))
         for name in ("laf", "descriptors", "response", "shape_laf"):
             assert torch.equal(getattr(a.features, name), getattr(b.features, name)), name
+
+
+def test_match_jobs_of_a_cuda_pipeline_equal_one_process(levels):
+    """On CUDA, ``match_jobs`` copies the jobs' features to the CPU before forking: the same matches and
+    positions as one process, or forked on the CPU. The CPU pipeline stands in for a CUDA one: its ``device``
+    is all that ``match_jobs`` reads to choose."""
+    pipeline, blocks, _, shared, per_block = levels
+    own = [shared[0].features.subset(torch.from_numpy(m)) for m in shared[0].members]
+    jobs = [(own[i], per_block[j].features, blocks[i], blocks[j], None) for i in range(2) for j in range(2)]
+    jobs += [(own[0], per_block[0].features, blocks[0], blocks[0], lambda y0, y1: y0[:, 0] < 120), None]
+    cuda_like = copy.copy(pipeline)
+    cuda_like.device = torch.device("cuda")
+    runs = [match_jobs(p, len(jobs), jobs.__getitem__, w) for p, w in ((pipeline, 1), (pipeline, 2), (cuda_like, 2))]
+    assert len(runs[0][0][0]) > 20 and 0 < len(runs[0][4][0]) < len(runs[0][0][0]) and len(runs[0][5][0]) == 0
+    for other in runs[1:]:
+        for (m, xy0, xy1), (n, yy0, yy1) in zip(runs[0], other, strict=True):
+            assert np.array_equal(m.idx0, n.idx0) and np.array_equal(m.idx1, n.idx1)
+            assert np.array_equal(m.scores, n.scores) and np.array_equal(xy0, yy0) and np.array_equal(xy1, yy1)
 
 
 def test_ransac_batches_do_not_depend_on_the_workers():

@@ -86,6 +86,11 @@ class Features:
         shape_laf = None if self.shape_laf is None else self.shape_laf[index]
         return Features(self.laf[index], self.descriptors[index], self.response[index], shape_laf)
 
+    def to(self, device: torch.device | str) -> Features:
+        """The features on ``device``."""
+        shape_laf = None if self.shape_laf is None else self.shape_laf.to(device)
+        return Features(self.laf.to(device), self.descriptors.to(device), self.response.to(device), shape_laf)
+
 
 @dataclass
 class Matches:

@@ -33,7 +33,7 @@ import torch
 
 from ..features.laf import set_laf_angle
 from ..geometry.ransac import HomographyRansacConfig, ransac_homography_many
-from ..pipelines import BasePipeline
+from ..pipelines import BasePipeline, CandidateFilter
 from ..types import Features, Keypoints, Matches
 from .blocks import Block, points_in_blocks, resize_lanczos
 from .clusters import greedy_clusters
@@ -160,13 +160,15 @@ def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], work
     image, per block, or detected per block and described per scale (see ``LevelRequest``).
 
     The detections (one per image and scale, or per block; "merged": first the block crops' detectors, then
-    one description per image and scale) run in ``workers`` forked processes, the largest first; each runs
-    single-threaded torch, as in one process, so the features do not depend on ``workers``.
+    one description per image and scale) run in ``workers`` forked processes (one process on CUDA), the
+    largest first; each runs single-threaded torch, as in one process, so the features do not depend on
+    ``workers``.
 
     Returns:
         Per request: "scale" and "merged" detection, one ScaleLevel per distinct block scale, in increasing
         scale index; "block", one ScaleLevel per block, in block order. Features are in scaled-image pixels.
     """
+    workers = device_workers(pipeline, workers)
     detections, merged = [], []
     for r, request in enumerate(requests):
         blocks = request.blocks
@@ -292,7 +294,8 @@ def describe_fixed_bins(pipeline: BasePipeline, requests: list[tuple[ScaleLevel,
         requests: (level, orientation bin -> indices of the level's features needed under that bin's angle),
             each level at most once. Each (level, bin) is described in one batched call, and only for features
             not already cached.
-        workers: forked processes sharing the calls (the same batches as in one process: same descriptors).
+        workers: forked processes sharing the calls (the same batches as in one process: same descriptors);
+            one process on CUDA.
     """
     tasks = []
     for level, wanted in requests:
@@ -304,6 +307,7 @@ def describe_fixed_bins(pipeline: BasePipeline, requests: list[tuple[ScaleLevel,
                 tasks.append((level, bin_index, missing))
     tasks.sort(key=lambda task: -len(task[2]))  # the largest first: even loads over the workers
 
+    workers = device_workers(pipeline, workers)
     forked = workers > 1
 
     def describe(k: int) -> np.ndarray | torch.Tensor:
@@ -370,8 +374,6 @@ def to_block_frame(features: Features, block: Block) -> Features:
     return translate_features(features, (-block.box[0], -block.box[1]))
 
 
-PairFeatures = Callable[[tuple[int, int]], Features]
-
 _FORK_TASK: Callable[[int], Any] | None = None  # set just before forking workers, read by _run_chunk in the children
 
 
@@ -401,22 +403,52 @@ def fork_map(fn: Callable[[int], Any], count: int, workers: int, chunks: int) ->
     return [result for part in parts for result in part]
 
 
-def _match_one(pipeline: BasePipeline, pair: tuple[int, int], get0: PairFeatures, get1: PairFeatures,
-               blocks0: list[Block], blocks1: list[Block]) -> Matches:
-    """The base pipeline on one block pair (features shifted into each block's own frame)."""
-    f0, f1 = get0(pair), get1(pair)
-    if len(f0) < 4 or len(f1) < 4:
-        return Matches.empty()
-    b0, b1 = blocks0[pair[0]], blocks1[pair[1]]
-    return pipeline.match(to_block_frame(f0, b0), to_block_frame(f1, b1), b0.shape, b1.shape)
+def device_workers(pipeline: BasePipeline, workers: int) -> int:
+    """Workers for calls that run the pipeline's networks or read its tensors: one on CUDA (forked processes
+    cannot use CUDA), else ``workers``."""
+    device = getattr(pipeline, "device", None)
+    return 1 if device is not None and device.type == "cuda" else workers
 
 
-def match_pairs(pipeline: BasePipeline, pairs: list[tuple[int, int]], get0: PairFeatures, get1: PairFeatures,
-                blocks0: list[Block], blocks1: list[Block], workers: int = 1) -> list[Matches]:
-    """The base pipeline on many block pairs, in ``workers`` forked processes (see ``fork_map``) when > 1."""
-    workers = workers if len(pairs) >= 4 * workers else 1
-    return fork_map(lambda k: _match_one(pipeline, pairs[k], get0, get1, blocks0, blocks1), len(pairs), workers,
-                    8 * workers)
+MatchJob = tuple[Features, Features, Block, Block, CandidateFilter | None]
+JobMatches = tuple[Matches, np.ndarray, np.ndarray]
+
+
+def match_jobs(pipeline: BasePipeline, count: int, job: Callable[[int], MatchJob | None], workers: int = 1
+               ) -> list[JobMatches]:
+    """The base pipeline on ``count`` block (or tile) pairs, in ``workers`` forked processes (``fork_map``).
+
+    ``job(k)`` gives pair k's features (in their level's pixels), its two blocks and a candidate filter (on
+    block-frame positions), or None for no match. On CUDA the jobs' features are first copied to the CPU in
+    this process, as forked processes cannot use CUDA, and matched there: one pair's Blob matching is too
+    small a problem for a GPU (3.8 ms a pair on an H100, in one process, in the profile of a Slime call).
+
+    Returns:
+        Per pair: the matches, and the matched positions (K, 2) float64 in the features' level pixels.
+    """
+    if device_workers(pipeline, workers) == workers:
+        return fork_map(lambda k: _match_job(pipeline, job(k)), count, workers, 8 * workers)
+    copies: dict[int, tuple[Features, Features]] = {}  # id -> (features, CPU copy): pairs share block features
+
+    def on_cpu(features: Features) -> Features:
+        if id(features) not in copies:
+            copies[id(features)] = features, features.to("cpu")
+        return copies[id(features)][1]
+
+    jobs = [None if j is None else (on_cpu(j[0]), on_cpu(j[1]), *j[2:]) for j in map(job, range(count))]
+    return fork_map(lambda k: _match_job(pipeline, jobs[k]), count, workers, 8 * workers)
+
+
+def _match_job(pipeline: BasePipeline, job: MatchJob | None) -> JobMatches:
+    """The base pipeline on one pair (features shifted into each block's own frame): its matches and matched
+    positions in the features' own pixels."""
+    if job is None or len(job[0]) < 4 or len(job[1]) < 4:
+        return Matches.empty(), np.zeros((0, 2)), np.zeros((0, 2))
+    f0, f1, b0, b1, candidate_filter = job
+    m = pipeline.match(to_block_frame(f0, b0), to_block_frame(f1, b1), b0.shape, b1.shape,
+                       candidate_filter=candidate_filter)
+    xy0, xy1 = (f.xy.detach().cpu().numpy().astype(np.float64) for f in (f0, f1))
+    return m, xy0[m.idx0], xy1[m.idx1]
 
 
 RANSAC_BATCH = 50  # block pairs per batched RANSAC: a fixed split, so results do not depend on the workers
@@ -467,11 +499,15 @@ def match_block_pairs(
     def own1(pair):
         return own_block(1, pair[1])
 
+    def own_job(k: int) -> MatchJob:
+        w0, w1 = pairs[k]
+        return own_block(0, w0), own_block(1, w1), blocks0[w0], blocks1[w1], None
+
     # 3.2: the base pipeline with its own orientations, then RANSAC.
-    first = match_pairs(pipeline, pairs, own0, own1, blocks0, blocks1, workers)
-    results = ransac_batches([_positions(own0(p), own1(p), m) for p, m in zip(pairs, first)], ransac, seed, workers)
+    first = match_jobs(pipeline, len(pairs), own_job, _pair_workers(len(pairs), workers))
+    results = ransac_batches([(xy0, xy1) for _, xy0, xy1 in first], ransac, seed, workers)
     thetas = {}
-    for pair, m, res in zip(pairs, first, results):
+    for pair, (m, _, _), res in zip(pairs, first, results):
         if res.model is None or res.inliers.sum() < min_matches:
             continue
         f0, f1 = own0(pair), own1(pair)
@@ -506,12 +542,15 @@ def match_block_pairs(
     def fixed1(pair):
         return fixed_block(1, pair[1], bin_of[pair])
 
-    second = match_pairs(pipeline, refined_pairs, fixed0, fixed1, blocks0, blocks1, workers)
-    results = ransac_batches([_positions(fixed0(p), fixed1(p), m) for p, m in zip(refined_pairs, second)], ransac,
-                             seed + 1, workers)
+    def fixed_job(k: int) -> MatchJob:
+        pair = refined_pairs[k]
+        return fixed0(pair), fixed1(pair), blocks0[pair[0]], blocks1[pair[1]], None
+
+    second = match_jobs(pipeline, len(refined_pairs), fixed_job, _pair_workers(len(refined_pairs), workers))
+    results = ransac_batches([(xy0, xy1) for _, xy0, xy1 in second], ransac, seed + 1, workers)
 
     keep_pairs, hs, theta_out, parts = [], [], [], []
-    for pair, m, res in zip(refined_pairs, second, results):
+    for pair, (m, _, _), res in zip(refined_pairs, second, results):
         if res.model is None or res.inliers.sum() < min_matches:
             continue
         f0, f1 = fixed0(pair), fixed1(pair)
@@ -524,10 +563,9 @@ def match_block_pairs(
     return _collect(keep_pairs, hs, theta_out, parts), counts
 
 
-def _positions(f0: Features, f1: Features, m: Matches) -> tuple[np.ndarray, np.ndarray]:
-    xy0 = f0.xy.detach().cpu().numpy().astype(np.float64)[m.idx0]
-    xy1 = f1.xy.detach().cpu().numpy().astype(np.float64)[m.idx1]
-    return xy0, xy1
+def _pair_workers(count: int, workers: int) -> int:
+    """Forking pays only from about four block pairs a worker."""
+    return workers if count >= 4 * workers else 1
 
 
 def _collect(pairs, hs, thetas, parts) -> BlockPairMatches:
@@ -556,9 +594,11 @@ __all__ = [
     "build_levels",
     "build_levels_many",
     "describe_fixed_bins",
+    "device_workers",
     "fixed_features",
     "fork_map",
     "match_block_pairs",
+    "match_jobs",
     "orientation_bin",
     "ransac_batches",
     "to_block_frame",

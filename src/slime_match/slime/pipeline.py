@@ -60,8 +60,9 @@ class SlimeConfig:
         bins: orientation histogram bins of the block-pair refinement (16).
         min_plane_matches: a block pair yields a plane only with at least this many RANSAC inliers
             (ours: the paper does not state a minimum; 4 would be any minimal sample).
-        workers: processes for the detections, block pairs and tiles (None = one per CPU core on CPU, 1 on
-            CUDA).
+        workers: processes for the detections, block pairs and tiles (None = one per CPU core). On CUDA the
+            device work (detection, descriptors, Blob matching) stays in one process and the workers run the
+            CPU halves (DTM, RANSAC).
         refine_tiles: run Sec. 3.8 (tile re-matching + global DTM); False stops at F^theta.
         global_dtm: the final DTM on the union of F^theta and tile matches (Sec. 3.8); None: the base
             pipeline's ``slime_global_dtm`` (the paper's Slimed Key.Net runs none). Exact duplicates are merged
@@ -180,15 +181,9 @@ def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks
     return table, h, side
 
 
-def _workers(requested: int | None, pipeline: BasePipeline) -> int:
-    """Worker processes for the block pairs: CUDA work stays in one process (CUDA does not survive fork),
-    even when more were requested."""
-    device = getattr(pipeline, "device", None)
-    if device is not None and device.type == "cuda":
-        if requested is not None and requested > 1:
-            logger.warning("workers=%d ignored on CUDA: forked processes cannot use CUDA, Slime runs in one",
-                           requested)
-        return 1
+def _workers(requested: int | None) -> int:
+    """Worker processes for Slime's stages: ``requested``, or one per CPU core. On CUDA they run only the
+    CPU halves (DTM, RANSAC): the device work stays in one process (see ``device_workers``)."""
     return max(1, requested) if requested is not None else max(1, os.cpu_count() or 1)
 
 
@@ -234,7 +229,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     for message in (layout_warning(len(blocks0), len(blocks1)), tile_count_warning(len(tiles0), len(tiles1))):
         if message:
             warn(message)
-    workers = _workers(config.workers, pipeline)
+    workers = _workers(config.workers)
     if workers > 1:  # loaded once here, the forked workers of every stage inherit the compiled loops
         pipeline.load_kernels()
         ransac_kernels.load_kernels()

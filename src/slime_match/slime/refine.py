@@ -6,18 +6,17 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 from scipy.spatial import cKDTree
 
 from ..matching.dtm import DTMConfig, dtm_filter
 from ..pipelines import BasePipeline
 from .block_matching import (
+    MatchJob,
     ScaleLevel,
     describe_fixed_bins,
     fixed_features,
-    fork_map,
+    match_jobs,
     orientation_bin,
-    to_block_frame,
 )
 from .blocks import Block
 from .clusters import greedy_clusters
@@ -88,23 +87,15 @@ def match_tiles(
     describe_fixed_bins(pipeline, [(level, {b: np.concatenate(parts) for b, parts in wanted.items()})
                                    for level, wanted in requests.values()], bins, workers)
 
-    def match(k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """Matched positions (tile-pair features' own xy) and scores of job k, None when nothing matched."""
+    def job(k: int) -> MatchJob:
         c0, c1, b = jobs[k]
         (level0, i0), (level1, i1) = where0[c0], where1[c1]
+        offset0, offset1 = np.array(tiles0[c0].box[:2]), np.array(tiles1[c1].box[:2])
         f0 = fixed_features(level0, level0.members[i0], 0, bins)
         f1 = fixed_features(level1, level1.members[i1], b, bins)
-        if len(f0) < 4 or len(f1) < 4:
-            return None
-        offset0, offset1 = np.array(tiles0[c0].box[:2]), np.array(tiles1[c1].box[:2])
-        m = pipeline.match(to_block_frame(f0, tiles0[c0]), to_block_frame(f1, tiles1[c1]), tiles0[c0].shape,
-                           tiles1[c1].shape, candidate_filter=lambda y0, y1: guide(y0 + offset0, y1 + offset1))
-        if len(m) == 0:
-            return None
-        return (f0.xy[torch.from_numpy(m.idx0)].cpu().numpy(), f1.xy[torch.from_numpy(m.idx1)].cpu().numpy(),
-                m.scores)
+        return f0, f1, tiles0[c0], tiles1[c1], lambda y0, y1: guide(y0 + offset0, y1 + offset1)
 
-    found = [r for r in fork_map(match, len(jobs), workers, len(jobs)) if r is not None]
+    found = [(xy0, xy1, m.scores) for m, xy0, xy1 in match_jobs(pipeline, len(jobs), job, workers) if len(m)]
     out0, out1, scores = (list(column) for column in zip(*found)) if found else ([], [], [])
     if not out0:
         return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
