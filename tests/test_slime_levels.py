@@ -19,6 +19,8 @@ from slime_match.matcher import Matcher
 from slime_match.pipelines import BaseConfig, make_base_pipeline
 from slime_match.slime.block_matching import (
     LevelRequest,
+    _Detection,
+    _merged_keypoints,
     build_levels,
     build_levels_many,
     describe_fixed_bins,
@@ -27,9 +29,10 @@ from slime_match.slime.block_matching import (
     match_jobs,
     merge_keypoints,
     ransac_batches,
+    torch_threads,
     translate_features,
 )
-from slime_match.slime.blocks import make_blocks, points_in_blocks
+from slime_match.slime.blocks import make_blocks, points_in_blocks, resize_lanczos
 from slime_match.types import Features
 
 WEIGHT_FREE = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift"}
@@ -206,6 +209,28 @@ def test_match_jobs_of_a_cuda_pipeline_equal_one_process(levels):
         for (m, xy0, xy1), (n, yy0, yy1) in zip(runs[0], other, strict=True):
             assert np.array_equal(m.idx0, n.idx0) and np.array_equal(m.idx1, n.idx1)
             assert np.array_equal(m.scores, n.scores) and np.array_equal(xy0, yy0) and np.array_equal(xy1, yy1)
+
+
+def test_merged_detection_of_a_cuda_pipeline_runs_on_the_cpu_in_the_workers(levels):
+    """With workers, a CUDA pipeline's block crops are detected on the CPU in forked processes: the keypoints of
+    a CPU pipeline. The stand-in's detector fails unless asked for the CPU, so it shows where each crop ran."""
+    pipeline, blocks, _, _, _ = levels
+    image, _ = _squares()
+    requests = [LevelRequest(image, blocks, detection="merged")]
+    detections = [_Detection(0, [0, 1], resize_lanczos(image, blocks[0].factor), None, None)]
+    cuda_like = copy.copy(pipeline)
+    cuda_like.device = torch.device("cuda")
+
+    def cpu_only(crop, device=None):
+        assert device == torch.device("cpu"), "a crop was detected on the pipeline's device"
+        return pipeline.detect_keypoints(crop, device)
+
+    cuda_like.detect_keypoints = cpu_only
+    with torch_threads(1):  # as build_levels_many runs it (forked workers run single-threaded torch)
+        (want, want_members), = _merged_keypoints(pipeline, detections, requests, 1)
+        (got, got_members), = _merged_keypoints(cuda_like, detections, requests, 2)
+    assert len(want) > 20 and torch.equal(want.xy, got.xy) and torch.equal(want.response, got.response)
+    assert all(np.array_equal(a, b) for a, b in zip(want_members, got_members, strict=True))
 
 
 def test_ransac_batches_do_not_depend_on_the_workers():

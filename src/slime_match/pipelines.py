@@ -104,9 +104,10 @@ class BasePipeline:
         will only ever be described under fixed orientations (Slime's tiles)."""
         raise NotImplementedError
 
-    def detect_keypoints(self, image: np.ndarray) -> Keypoints:
-        """The detector alone on an (H, W, 3) float image (Slime's merged per-block detection); only
-        pipelines whose ``slime_detection`` is "merged" have it."""
+    def detect_keypoints(self, image: np.ndarray, device: torch.device | None = None) -> Keypoints:
+        """The detector alone on an (H, W, 3) float image (Slime's merged per-block detection), on ``device``
+        (None: the pipeline's; Slime's forked workers detect on the CPU for a CUDA pipeline); only pipelines
+        whose ``slime_detection`` is "merged" have it."""
         raise ConfigError(f"the {self.name} base pipeline has no detector separate from its descriptor: "
                           "Slime's 'merged' detection needs one (use detection 'scale' or 'block')")
 
@@ -174,8 +175,8 @@ class HzPlusPipeline(BasePipeline):
     def detect_regions(self, context: HzContext) -> Features:
         return self.describe_keypoints(context, detect_harrisz(context.image, self.harrisz), regions_only=True)
 
-    def detect_keypoints(self, image: np.ndarray) -> Keypoints:
-        return detect_harrisz(to_tensor(image, self.device), self.harrisz)
+    def detect_keypoints(self, image: np.ndarray, device: torch.device | None = None) -> Keypoints:
+        return detect_harrisz(to_tensor(image, device or self.device), self.harrisz)
 
     def describe_keypoints(self, context: HzContext, keypoints: Keypoints, regions_only: bool = False) -> Features:
         if not regions_only:
