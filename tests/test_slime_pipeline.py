@@ -198,9 +198,11 @@ def test_max_side_matches_in_original_pixels():
     stages = result.stages
     np.testing.assert_allclose(np.sort(stages["final_xy0"], axis=0), np.sort(result.keypoints0, axis=0))
     assert stages["blocks0"][:, 2].max() == pytest.approx(799.5) and stages["tiles1"][:, 3].max() == pytest.approx(639.5)
-    own = stages["block_matches_plane"] == 0  # plane 0's matches follow its homography
+    # plane 0's matches follow its homography: RANSAC's bound is 15 px in the half-size working frame, 30 px
+    # here; a frame mix-up would be off by a few hundred px (on a GPU plane 0 gave a median of 7.6 px)
+    own = stages["block_matches_plane"] == 0
     moved, _ = project(stages["planes_H"][0], stages["block_matches_xy0"][own])
-    assert own.sum() >= 4 and np.median(np.linalg.norm(moved - stages["block_matches_xy1"][own], axis=1)) < 5
+    assert own.sum() >= 4 and np.median(np.linalg.norm(moved - stages["block_matches_xy1"][own], axis=1)) < 15
 
 
 def test_max_side_bad_values(graf_small):
