@@ -5,7 +5,9 @@ once per image and block scale on the whole scaled image and shared by every blo
 keypoint (a block owns the keypoints of its core, i.e. the block minus its 32 px padding); descriptors
 under a fixed orientation are computed once per (scale, orientation bin) and only for the keypoints that
 a block pair needs; RANSACs of all block pairs run as one batch; the detections, block pairs and RANSAC
-batches are spread over forked worker processes.  How blocks get their keypoints (``LevelRequest.detection``):
+batches are spread over forked worker processes. Forked processes cannot use CUDA: on CUDA the networks run
+in the main process, while the block crops' detector and the block and tile pairs run on the CPU in the
+workers (``uses_cuda``).  How blocks get their keypoints (``LevelRequest.detection``):
 
 * "scale": one detection per block scale on the whole scaled image, each block owning its core's keypoints;
 * "block": the paper's prototype, each block crop (zero-padded box) detected and described on its own, so
