@@ -61,8 +61,8 @@ class SlimeConfig:
         min_plane_matches: a block pair yields a plane only with at least this many RANSAC inliers
             (ours: the paper does not state a minimum; 4 would be any minimal sample).
         workers: processes for the detections, block pairs and tiles (None = one per CPU core). On CUDA the
-            device work (detection, descriptors, Blob matching) stays in one process and the workers run the
-            CPU halves (DTM, RANSAC).
+            networks stay in one process and the workers run the block crops' detector and the block and
+            tile pairs (Blob matching, DTM, RANSAC) on the CPU.
         refine_tiles: run Sec. 3.8 (tile re-matching + global DTM); False stops at F^theta.
         global_dtm: the final DTM on the union of F^theta and tile matches (Sec. 3.8); None: the base
             pipeline's ``slime_global_dtm`` (the paper's Slimed Key.Net runs none). Exact duplicates are merged
@@ -182,8 +182,8 @@ def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks
 
 
 def _workers(requested: int | None) -> int:
-    """Worker processes for Slime's stages: ``requested``, or one per CPU core. On CUDA they run only the
-    CPU halves (DTM, RANSAC): the device work stays in one process (see ``device_workers``)."""
+    """Worker processes for Slime's stages: ``requested``, or one per CPU core. On CUDA they run only CPU
+    work: the networks stay in one process (see ``device_workers`` and ``uses_cuda``)."""
     return max(1, requested) if requested is not None else max(1, os.cpu_count() or 1)
 
 
