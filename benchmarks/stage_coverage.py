@@ -13,6 +13,9 @@ Per pair (raw matches, correct = two-sided error < 15 px, the paper's coverage: 
   ``superset`` (H), ``epipolar`` (H after the Sec. 3.6 vote), ``fbar`` (F-bar, two sets a tile),
   ``ftheta`` (fused, orientation-filtered F^theta), ``tile_matches`` (Sec. 3.8 before the global DTM),
   ``dtm_input`` (the global DTM's input: F^theta and the tile matches, exact duplicates merged), ``final``.
+- ``guided_bound``: F^theta's matches plus the ``repeatable`` matches whose flow lies within 15 px of some
+  F^theta match at both ends (the Sec. 3.8 flow test): a loose upper bound for the tile refinement, since any
+  tile match must pass that test.
 A stage whose coverage falls well below the previous one is where area is lost.
 
 ``--global-dtm-variants "inside_tolerance=4;cluster_radius=2"`` adds, per variant, an entry
@@ -42,7 +45,7 @@ from slime_match.io import load_image, to_tensor
 from slime_match.matcher import Matcher
 from slime_match.matching.dtm import DTMConfig
 from slime_match.resize import resize_image, to_original
-from slime_match.slime.refine import CLUSTER_RADIUS, global_dtm, merge_duplicates
+from slime_match.slime.refine import CLUSTER_RADIUS, FlowGuide, global_dtm, merge_duplicates
 
 STAGES = ("block_matches", "expanded", "superset", "epipolar", "fbar", "ftheta", "tile_matches", "dtm_input",
           "final")
@@ -88,6 +91,15 @@ def stage_matches(stages: dict[str, np.ndarray]) -> dict[str, tuple[np.ndarray, 
     }
 
 
+def guided_bound(repeatable: tuple[np.ndarray, np.ndarray], ftheta: tuple[np.ndarray, np.ndarray], scale0, scale1,
+                 t: float = 15.0) -> tuple[np.ndarray, np.ndarray]:
+    """F^theta's matches (matcher frame, mapped to original pixels with ``to_original``) plus the repeatable
+    matches (original pixels) within ``t`` px of one of them at both ends: (N, 2), (N, 2) original pixels."""
+    g0, g1 = to_original(ftheta[0], scale0), to_original(ftheta[1], scale1)
+    near = FlowGuide(g0, g1, t)(*repeatable)
+    return np.r_[g0, repeatable[0][near]], np.r_[g1, repeatable[1][near]]
+
+
 def parse_dtm_variant(spec: str) -> tuple[dict[str, float], float]:
     """``"inside_tolerance=4,cluster_radius=2"`` -> ({DTMConfig field: value}, cluster radius in px)."""
     names = {f.name for f in fields(DTMConfig)}
@@ -128,12 +140,15 @@ def pair_row(pair, slime: Matcher, base: Matcher, dtm_variants: Sequence[str] = 
         return {"matches": len(ok), "correct": int(ok.sum()), "precision": float(ok.mean()) if len(ok) else 0.0,
                 "coverage": cov}
 
-    row = {"repeatable": score(*repeatable_matches(image0, image1, pair.H), frame=False)}
+    repeatable = repeatable_matches(image0, image1, pair.H)
+    row = {"repeatable": score(*repeatable, frame=False)}
     hz = base(a, b)
     row["hz+"] = score(hz.keypoints0, hz.keypoints1, frame=False)
     result = slime(a, b)
-    for name, (x0, x1) in stage_matches(result.stages).items():
+    stages = stage_matches(result.stages)
+    for name, (x0, x1) in stages.items():
         row[name] = score(x0, x1)
+    row["guided_bound"] = score(*guided_bound(repeatable, stages["ftheta"], s0, s1), frame=False)
     for spec in dtm_variants:
         row[f"final[{spec}]"] = score(*dtm_variant_matches(result.stages, (a.shape[:2], b.shape[:2]),
                                                            slime.pipeline.config.dtm, spec))
