@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from slime_match.geometry.fundamental import epipolar_distance, fundamental_8point
+from slime_match.geometry.fundamental import epipolar_distance, epipolar_distance_batch, fundamental_8point
+from slime_match.slime.epipolar_kernels import epipolar_votes
 from slime_match.slime.blocks import make_tiles
 from slime_match.slime.planes import MatchTable
 from slime_match.slime.tiles import (
@@ -124,6 +125,17 @@ def test_moments_fundamental_matches_eight_point():
     f_ref = f_ref / np.linalg.norm(f_ref) * np.sign(np.sum(f_ref * f))
     assert np.abs(f - f_ref).max() < 1e-3  # RMS vs mean-distance normalisation: tiny difference
     assert epipolar_distance(f, x0[idx], x1[idx]).max() < 3.0
+
+
+def test_epipolar_votes_count_the_fundamental_matrices_within_the_threshold():
+    rng = np.random.default_rng(0)
+    f = rng.normal(size=(7, 3, 3))
+    x0, x1 = rng.uniform(-2, 2, (50, 2)), rng.uniform(-2, 2, (50, 2))
+    votes = np.full(50, 3.0)  # added to, not overwritten
+    epipolar_votes(f, np.ascontiguousarray(x0.T), np.ascontiguousarray(x1.T), 0.5**2, votes)
+    expected = 3 + (epipolar_distance_batch(f, x0, x1) < 0.5).sum(0)
+    np.testing.assert_array_equal(votes, expected)
+    assert 3 < votes.mean() < 10  # some votes, not all
 
 
 def test_epipolar_consistency_keeps_the_scene_and_drops_a_wrong_plane():

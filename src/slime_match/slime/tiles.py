@@ -25,10 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import torch
 
 from slime_match.errors import ConfigError
 from slime_match.slime.blocks import Block, points_in_blocks
+from slime_match.slime.epipolar_kernels import epipolar_votes
 from slime_match.slime.planes import MatchTable, group_relative_orientation, wrap_angle
 
 __all__ = [
@@ -332,7 +332,6 @@ def epipolar_consistency(
     t_xi: float = _D.t_xi,
     min_union: int = _D.min_union,
     chunk: int = _D.chunk,
-    device: str | torch.device = "cpu",
 ) -> np.ndarray:
     """M+: matches consistent with many of the fundamental matrices of pairs of sets (paper Sec. 3.6).
 
@@ -353,8 +352,7 @@ def epipolar_consistency(
         t_perp: epipolar distance threshold in px.
         t_xi: vote threshold factor.
         min_union: pairs whose union has fewer distinct matches are skipped (no vote).
-        chunk: (F, match) pairs evaluated at once.
-        device: torch device for the vote (the F estimation is numpy).
+        chunk: (F, match) pairs evaluated at once (``epipolar_kernels.epipolar_votes``).
 
     Returns:
         (M,) bool, True for the matches of M+ (only matches of some set can be True).
@@ -404,8 +402,7 @@ def epipolar_consistency(
     need = t_xi * n_sets / 2.0
     votes = np.zeros(len(members))
     active = np.arange(len(members))
-    px0 = torch.as_tensor(x0.T, dtype=torch.float32, device=device)  # (3, N)
-    px1 = torch.as_tensor(x1.T, dtype=torch.float32, device=device)
+    px0, px1 = np.ascontiguousarray(x0[:, :2].T), np.ascontiguousarray(x1[:, :2].T)  # (2, N)
     tol2 = (t_perp / scale) ** 2
     done = 0
     while done < n_pairs and len(active):
@@ -420,15 +417,10 @@ def epipolar_consistency(
         cnt[hit] -= count_shared[pos[hit]].astype(cnt.dtype)
         ok = cnt >= min_union
         if ok.any():
-            f = torch.as_tensor(_fundamental_from_moments(mom[ok].reshape(-1, 9, 9)), dtype=torch.float32)
-            f = f.to(device)
-            act = torch.as_tensor(active, device=device)
-            q0, q1 = px0[:, act], px1[:, act]
-            kk = (q1[:, None] * q0[None]).reshape(9, -1)
-            alg = (f.reshape(-1, 9) @ kk).square_()  # (x'^T F x)^2
-            n1 = torch.matmul(f[:, :2, :], q0).square_().sum(1)  # |(F x)_{1,2}|^2
-            n0 = torch.matmul(f[:, :, :2].transpose(1, 2), q1).square_().sum(1)  # |(F^T x')_{1,2}|^2
-            votes[active] += (alg < tol2 * torch.minimum(n0, n1)).sum(0).cpu().numpy()
+            add = np.zeros(len(active))
+            epipolar_votes(_fundamental_from_moments(mom[ok].reshape(-1, 9, 9)), px0.take(active, 1),
+                           px1.take(active, 1), tol2, add)  # take: C-contiguous rows, which the loop needs
+            votes[active] += add
         passed = votes[active] > need
         keep[members[active[passed]]] = True
         active = active[~passed & (votes[active] + (n_pairs - done) > need)]
