@@ -7,8 +7,9 @@ import pytest
 import scipy.sparse as sp
 
 from slime_match.geometry.fundamental import epipolar_distance, epipolar_distance_batch, fundamental_8point
-from slime_match.slime.epipolar_kernels import epipolar_votes
+from slime_match.slime import tiles
 from slime_match.slime.blocks import make_tiles
+from slime_match.slime.epipolar_kernels import epipolar_votes
 from slime_match.slime.planes import MatchTable
 from slime_match.slime.tiles import (
     TileSets,
@@ -138,7 +139,7 @@ def test_epipolar_votes_count_the_fundamental_matrices_within_the_threshold():
     assert 3 < votes.mean() < 10  # some votes, not all
 
 
-def test_epipolar_consistency_keeps_the_scene_and_drops_a_wrong_plane():
+def test_epipolar_consistency_keeps_the_scene_and_drops_a_wrong_plane(monkeypatch):
     x0, x1, _ = _two_plane_scene()
     n = 200
     table = _table(x0, x1)
@@ -156,6 +157,10 @@ def test_epipolar_consistency_keeps_the_scene_and_drops_a_wrong_plane():
     assert not epipolar_consistency(table, ts, t_xi=100).any()
     # chunking does not change the result
     np.testing.assert_array_equal(epipolar_consistency(table, ts, chunk=5000), keep)
+    # nor do threads, here sharing even the smallest chunks
+    monkeypatch.setattr(tiles, "_THREADS_MIN_F", 1)
+    monkeypatch.setattr(tiles, "_THREADS_MIN_TESTS", 1)
+    np.testing.assert_array_equal(epipolar_consistency(table, ts, chunk=5000, threads=3), keep)
 
 
 def test_greedy_two_per_tile():

@@ -60,9 +60,9 @@ class SlimeConfig:
         bins: orientation histogram bins of the block-pair refinement (16).
         min_plane_matches: a block pair yields a plane only with at least this many RANSAC inliers
             (ours: the paper does not state a minimum; 4 would be any minimal sample).
-        workers: processes for the detections, block pairs and tiles (None = one per CPU core). On CUDA the
-            networks stay in one process and the workers run the block crops' detector and the block and
-            tile pairs (Blob matching, DTM, RANSAC) on the CPU.
+        workers: processes for the detections, block pairs and tiles, and threads for the epipolar vote
+            (None = one per CPU core). On CUDA the networks stay in one process and the workers run the
+            block crops' detector and the block and tile pairs (Blob matching, DTM, RANSAC) on the CPU.
         refine_tiles: run Sec. 3.8 (tile re-matching + global DTM); False stops at F^theta.
         global_dtm: the final DTM on the union of F^theta and tile matches (Sec. 3.8); None: the base
             pipeline's ``slime_global_dtm`` (the paper's Slimed Key.Net runs none). Exact duplicates are merged
@@ -187,15 +187,16 @@ def _workers(requested: int | None) -> int:
     return max(1, requested) if requested is not None else max(1, os.cpu_count() or 1)
 
 
-def select_planes(table: MatchTable, expanded, tiles0: list[Block], tiles1: list[Block], config: TileConfig
-                  ) -> dict[str, TileSets | np.ndarray | float]:
-    """Secs. 3.5-3.7: tile sets -> H* -> H -> M+ -> F-bar -> fused F^{l*} -> F^theta."""
+def select_planes(table: MatchTable, expanded, tiles0: list[Block], tiles1: list[Block], config: TileConfig,
+                  threads: int = 1) -> dict[str, TileSets | np.ndarray | float]:
+    """Secs. 3.5-3.7: tile sets -> H* -> H -> M+ -> F-bar -> fused F^{l*} -> F^theta (the epipolar vote in
+    ``threads`` threads: the same result for any number)."""
     w = table.weight
     sets = tile_sets(table, expanded, tiles0, tiles1)
     star = sets.subset(best_sets_per_tile_pair(sets, w, q=config.q_pair))
     superset = star.subset(best_sets_per_tile(star, w, q=config.q_tile))
     keep = epipolar_consistency(table, superset, t_perp=config.t_perp, t_xi=config.t_xi,
-                                min_union=config.min_union, chunk=config.chunk)
+                                min_union=config.min_union, chunk=config.chunk, threads=threads)
     filtered = superset.restrict(keep)
     groups = None if config.same_homography == "set" else plane_groups(filtered, config.t_ov,
                                                                          config.same_homography)
@@ -252,7 +253,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         expanded = expand_planes(table, h, side, config.planes)
     counts["expanded_memberships"] = int(expanded.nnz)
     with timer("plane_selection"):
-        selected = select_planes(table, expanded, tiles0, tiles1, config.tiles)
+        selected = select_planes(table, expanded, tiles0, tiles1, config.tiles, threads=workers)
     ftheta = selected["ftheta"]
     in_ftheta = ftheta.union()
     counts.update(tile_sets=len(selected["sets"]), superset_H=len(selected["superset"]),

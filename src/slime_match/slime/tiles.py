@@ -19,8 +19,10 @@ Cardinalities ``|.|`` are weighted by the table's duplicate weights when ``weigh
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -325,6 +327,21 @@ def _fundamental_from_moments(mom: np.ndarray) -> np.ndarray:
     return f / np.linalg.norm(f, axis=(1, 2), keepdims=True)
 
 
+_THREADS_MIN_F = 256  # fundamental matrices to estimate, and (F, match) tests, from which threads share a chunk
+_THREADS_MIN_TESTS = 100_000
+
+
+def _map(pool: ThreadPoolExecutor, fn, parts: list) -> list:
+    return list(pool.map(fn, parts)) if len(parts) > 1 else [fn(p) for p in parts]
+
+
+def _votes(f: np.ndarray, x0: np.ndarray, x1: np.ndarray, tol2: float, part: np.ndarray) -> np.ndarray:
+    """(P,) votes of the matches ``part`` (P,) of x0, x1 (2, N) among the fundamental matrices f (B, 3, 3)."""
+    out = np.zeros(len(part))
+    epipolar_votes(f, x0.take(part, 1), x1.take(part, 1), tol2, out)  # take: C-contiguous rows, which the
+    return out  # compiled loop needs to vectorise
+
+
 def epipolar_consistency(
     table: MatchTable,
     sets: TileSets,
@@ -332,6 +349,7 @@ def epipolar_consistency(
     t_xi: float = _D.t_xi,
     min_union: int = _D.min_union,
     chunk: int = _D.chunk,
+    threads: int = 1,
 ) -> np.ndarray:
     """M+: matches consistent with many of the fundamental matrices of pairs of sets (paper Sec. 3.6).
 
@@ -353,6 +371,8 @@ def epipolar_consistency(
         t_xi: vote threshold factor.
         min_union: pairs whose union has fewer distinct matches are skipped (no vote).
         chunk: (F, match) pairs evaluated at once (``epipolar_kernels.epipolar_votes``).
+        threads: threads sharing each chunk's F estimation and vote (numpy's eigh and the vote release the
+            GIL; the same result for any number).
 
     Returns:
         (M,) bool, True for the matches of M+ (only matches of some set can be True).
@@ -404,26 +424,27 @@ def epipolar_consistency(
     active = np.arange(len(members))
     px0, px1 = np.ascontiguousarray(x0[:, :2].T), np.ascontiguousarray(x1[:, :2].T)  # (2, N)
     tol2 = (t_perp / scale) ** 2
-    done = 0
-    while done < n_pairs and len(active):
-        idx = order[done : done + max(1, chunk // len(active))]
-        done += len(idx)
-        pa, pb = ia[idx], ib[idx]
-        mom = mom_set[pa] + mom_set[pb]
-        cnt = count_set[pa] + count_set[pb]
-        pos = np.minimum(np.searchsorted(shared, idx), max(len(shared) - 1, 0))
-        hit = shared[pos] == idx if len(shared) else np.zeros(len(idx), bool)
-        mom[hit] -= mom_shared[pos[hit]]
-        cnt[hit] -= count_shared[pos[hit]].astype(cnt.dtype)
-        ok = cnt >= min_union
-        if ok.any():
-            add = np.zeros(len(active))
-            epipolar_votes(_fundamental_from_moments(mom[ok].reshape(-1, 9, 9)), px0.take(active, 1),
-                           px1.take(active, 1), tol2, add)  # take: C-contiguous rows, which the loop needs
-            votes[active] += add
-        passed = votes[active] > need
-        keep[members[active[passed]]] = True
-        active = active[~passed & (votes[active] + (n_pairs - done) > need)]
+    with ThreadPoolExecutor(max(1, threads)) as pool:
+        done = 0
+        while done < n_pairs and len(active):
+            idx = order[done : done + max(1, chunk // len(active))]
+            done += len(idx)
+            pa, pb = ia[idx], ib[idx]
+            mom = mom_set[pa] + mom_set[pb]
+            cnt = count_set[pa] + count_set[pb]
+            pos = np.minimum(np.searchsorted(shared, idx), max(len(shared) - 1, 0))
+            hit = shared[pos] == idx if len(shared) else np.zeros(len(idx), bool)
+            mom[hit] -= mom_shared[pos[hit]]
+            cnt[hit] -= count_shared[pos[hit]].astype(cnt.dtype)
+            ok = cnt >= min_union
+            if ok.any():
+                f_parts = np.array_split(mom[ok].reshape(-1, 9, 9), threads if ok.sum() >= _THREADS_MIN_F else 1)
+                f = np.concatenate(_map(pool, _fundamental_from_moments, f_parts))
+                slices = np.array_split(active, threads if len(f) * len(active) >= _THREADS_MIN_TESTS else 1)
+                votes[active] += np.concatenate(_map(pool, functools.partial(_votes, f, px0, px1, tol2), slices))
+            passed = votes[active] > need
+            keep[members[active[passed]]] = True
+            active = active[~passed & (votes[active] + (n_pairs - done) > need)]
     log.debug(
         "epipolar_consistency: %d sets, %d F, %d/%d kept", n_sets, n_pairs, int(keep.sum()), len(members)
     )
