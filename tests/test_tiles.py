@@ -11,6 +11,7 @@ from slime_match.slime import tiles
 from slime_match.slime.blocks import make_tiles
 from slime_match.slime.epipolar_kernels import epipolar_votes
 from slime_match.slime.planes import MatchTable
+from slime_match.slime.tile_kernels import greedy_cover
 from slime_match.slime.tiles import (
     TileSets,
     _fundamental_from_moments,
@@ -76,6 +77,18 @@ def test_best_sets_per_tile_pair_is_coverage_greedy():
     w = np.ones(30)
     w[10:15] = 10.0
     assert best_sets_per_tile_pair(ts, w, q=1).tolist() == [2, 4]
+
+
+def test_greedy_cover_ties_and_sets_adding_nothing():
+    rows = [[0, 1], [2, 3], [0, 1, 2], [5], [6]]  # group 0: sets 0-2, group 1: sets 3-4
+    indptr = np.r_[0, np.cumsum([len(r) for r in rows])]
+    indices = np.concatenate(rows).astype(np.int64)
+    start, order = np.array([0, 3, 5]), np.arange(5)
+    # group 0: set 2 (3 new), then set 1 (match 3), then nothing (set 0 adds nothing); group 1: a tie, 3 then 4
+    assert greedy_cover(indptr, indices, np.ones(7), start, order, 3).tolist() == [1, 2, 3, 4]
+    assert greedy_cover(indptr, indices, np.ones(7), start, order, 1).tolist() == [2, 3]
+    heavy = np.array([1, 1, 1, 1, 1, 1, 5.0])
+    assert greedy_cover(indptr, indices, heavy, start, order, 1).tolist() == [2, 4]
 
 
 def test_best_sets_per_tile_spans_the_other_image():

@@ -32,6 +32,7 @@ from slime_match.errors import ConfigError
 from slime_match.slime.blocks import Block, points_in_blocks
 from slime_match.slime.epipolar_kernels import epipolar_votes
 from slime_match.slime.planes import MatchTable, group_relative_orientation, wrap_angle
+from slime_match.slime.tile_kernels import greedy_cover
 
 __all__ = [
     "TileConfig",
@@ -226,30 +227,16 @@ def _greedy_cover(sets: TileSets, group: np.ndarray, weights: np.ndarray | None,
     """Coverage-greedy ranking within groups: the r-th pick maximises the (weighted) matches not covered by
     the group's previous picks.  Ties go to the lowest set index.
 
+    Args:
+        group: (S,) int64 group of each set.
+
     Returns:
         Indices of the picked sets (at most q per group; a set adding nothing is never picked).
     """
     w = np.ones(sets.n_matches) if weights is None else np.asarray(weights, np.float64)
-    if len(sets) == 0:
-        return np.zeros(0, np.int64)
-    ent = sets.set_of_entry
-    ent_key = group[ent] * sets.n_matches + sets.indices  # (group, match) of each entry
-    covered = np.zeros(0, np.int64)
-    picked = []
-    ids = np.arange(len(sets))
-    for _ in range(q):
-        fresh = ~np.isin(ent_key, covered)
-        gain = np.bincount(ent, w[sets.indices] * fresh, minlength=len(sets))
-        order = np.lexsort((ids, -gain, group))
-        first = np.r_[True, group[order][1:] != group[order][:-1]]
-        best = order[first]
-        best = best[gain[best] > 0]
-        if len(best) == 0:
-            break
-        picked.append(best)
-        chosen = np.isin(ent, best)
-        covered = np.union1d(covered, ent_key[chosen])
-    return np.sort(np.concatenate(picked)) if picked else np.zeros(0, np.int64)
+    order = np.argsort(group, kind="stable")  # each group's sets, ascending
+    start = np.r_[0, np.flatnonzero(np.diff(group[order])) + 1, len(order)] if len(order) else np.zeros(1)
+    return greedy_cover(sets.indptr, sets.indices, w, start.astype(np.int64), order.astype(np.int64), q)
 
 
 def best_sets_per_tile_pair(
