@@ -1,8 +1,9 @@
-"""Compiled loop of the coverage-greedy set selection (paper Sec. 3.5, numba).
+"""Compiled loops of the tile sets (paper Sec. 3.5, numba): building them, and the coverage-greedy selection.
 
-Slime ranks thousands of tile sets, q rounds per tile pair and per tile; in numpy each round tested every
-entry against the covered (group, match) keys with ``np.isin``. Here each group is ranked on its own,
-with one flag per match.
+A plane's matches fall into thousands of tile-pair sets, each match into up to four tiles of each image.
+In numpy, building the sets took (membership, tile pair) temporaries of millions of entries and a sparse
+matrix conversion, and each selection round tested every entry against the covered (group, match) keys with
+``np.isin``. Here each plane, and each group of sets, is handled on its own in one pass.
 """
 
 from __future__ import annotations
@@ -54,3 +55,56 @@ def greedy_cover(indptr, indices, weights, group_start, group_sets, q):
             for e in range(indptr[s], indptr[s + 1]):
                 covered[indices[e]] = False
     return np.sort(picked[:n_picked])
+
+
+@njit(cache=True, nogil=True)
+def tile_pair_sets(plane_indptr, plane_indices, tiles0_indptr, tiles0_indices, tiles1_indptr, tiles1_indices,
+                   n_tiles0, n_tiles1):
+    """Every non-empty set {m in P_l : x_m in tile c, x'_m in tile c'}, sorted by (l, c, c').
+
+    Args:
+        plane_indptr, plane_indices: P_l in CSR layout (L planes, match indices ascending within a plane).
+        tiles0_indptr, tiles0_indices: the tiles of image 1 holding each match, CSR layout (M rows).
+        tiles1_indptr, tiles1_indices: the same in image 2.
+        n_tiles0, n_tiles1: numbers C and C' of tiles of the two images.
+
+    Returns:
+        plane, tile0, tile1: (S,) int64 each set's l, c and c'.
+        indptr (S + 1,), indices (nnz,): the sets' matches in CSR layout, ascending within each set.
+    """
+    total = 0
+    for e in range(len(plane_indices)):
+        m = plane_indices[e]
+        total += (tiles0_indptr[m + 1] - tiles0_indptr[m]) * (tiles1_indptr[m + 1] - tiles1_indptr[m])
+    indices = np.empty(total, np.int64)
+    most = min(total, (len(plane_indptr) - 1) * n_tiles0 * n_tiles1)  # sets at most
+    plane = np.empty(most, np.int64)
+    tile_pair = np.empty(most, np.int64)
+    indptr = np.zeros(most + 1, np.int64)
+    slot = np.zeros(n_tiles0 * n_tiles1, np.int64)  # per tile pair c C' + c': count, then next free entry
+    n_sets = 0
+    filled = 0
+    for l in range(len(plane_indptr) - 1):  # a counting sort of the plane's entries by tile pair
+        first_set = n_sets
+        for e in range(plane_indptr[l], plane_indptr[l + 1]):
+            m = plane_indices[e]
+            for a in range(tiles0_indptr[m], tiles0_indptr[m + 1]):
+                for b in range(tiles1_indptr[m], tiles1_indptr[m + 1]):
+                    slot[tiles0_indices[a] * n_tiles1 + tiles1_indices[b]] += 1
+        for key in range(len(slot)):
+            if slot[key]:
+                plane[n_sets], tile_pair[n_sets], indptr[n_sets] = l, key, filled
+                n_sets += 1
+                filled, slot[key] = filled + slot[key], filled
+        for e in range(plane_indptr[l], plane_indptr[l + 1]):  # matches ascending: so within each set
+            m = plane_indices[e]
+            for a in range(tiles0_indptr[m], tiles0_indptr[m + 1]):
+                for b in range(tiles1_indptr[m], tiles1_indptr[m + 1]):
+                    key = tiles0_indices[a] * n_tiles1 + tiles1_indices[b]
+                    indices[slot[key]] = m
+                    slot[key] += 1
+        for k in range(first_set, n_sets):
+            slot[tile_pair[k]] = 0
+    indptr[n_sets] = filled
+    return (plane[:n_sets].copy(), tile_pair[:n_sets] // n_tiles1, tile_pair[:n_sets] % n_tiles1,
+            indptr[:n_sets + 1].copy(), indices)

@@ -32,7 +32,7 @@ from slime_match.errors import ConfigError
 from slime_match.slime.blocks import Block, points_in_blocks
 from slime_match.slime.epipolar_kernels import epipolar_votes
 from slime_match.slime.planes import MatchTable, group_relative_orientation, wrap_angle
-from slime_match.slime.tile_kernels import greedy_cover
+from slime_match.slime.tile_kernels import greedy_cover, tile_pair_sets
 
 __all__ = [
     "TileConfig",
@@ -190,37 +190,16 @@ def tile_sets(table: MatchTable, planes: sp.csr_matrix, tiles0: list[Block], til
         The non-empty sets, sorted by (l, c, c').
     """
     planes = sp.csr_matrix(planes)
-    n_matches = len(table)
+    if not planes.has_sorted_indices:
+        planes = planes.sorted_indices()
     t0 = points_in_blocks(table.xy0, tiles0).T.tocsr()  # (M, C0)
     t1 = points_in_blocks(table.xy1, tiles1).T.tocsr()
-    n0, n1 = np.diff(t0.indptr), np.diff(t1.indptr)
-    # the tile pairs of every match, c * C' + c', match after match: pair_key[start[m]:start[m + 1]]
-    count = n0 * n1
-    start = np.cumsum(count) - count
-    owner = np.repeat(np.arange(n_matches), count)
-    k = np.arange(int(count.sum())) - start[owner]
-    pair_key = (t0.indices[t0.indptr[owner] + k // n1[owner]].astype(np.int64) * len(tiles1)
-                + t1.indices[t1.indptr[owner] + k % n1[owner]])
-    # every membership (l, m) once per tile pair of m
-    coo = planes.tocoo()
-    pl, mi = coo.row.astype(np.int64), coo.col.astype(np.int64)
-    reps = count[mi]
-    entry = np.arange(int(reps.sum())) + np.repeat(start[mi] - (np.cumsum(reps) - reps), reps)
-    m = np.repeat(mi, reps)
-    key = np.repeat(pl * (len(tiles0) * len(tiles1)), reps) + pair_key[entry]
-    space = planes.shape[0] * len(tiles0) * len(tiles1)
-    if space <= 8 * len(key) + (1 << 20):  # a presence table: np.unique's sorted keys and inverse, no sort
-        present = np.zeros(space, bool)
-        present[key] = True
-        uniq = np.flatnonzero(present)
-        set_id = (np.cumsum(present) - 1)[key]
-    else:
-        uniq, set_id = np.unique(key, return_inverse=True)
-    mat = sp.csr_matrix((np.ones(len(m), bool), (set_id.reshape(-1), m)), shape=(len(uniq), n_matches))
-    c1u = uniq % len(tiles1)
-    rest = uniq // len(tiles1)
-    log.debug("tile_sets: %d memberships -> %d sets", len(mi), len(uniq))
-    return TileSets.from_csr(mat, rest // len(tiles0), rest % len(tiles0), c1u)
+    plane, tile0, tile1, indptr, indices = tile_pair_sets(
+        planes.indptr.astype(np.int64), planes.indices.astype(np.int64), t0.indptr.astype(np.int64),
+        t0.indices.astype(np.int64), t1.indptr.astype(np.int64), t1.indices.astype(np.int64), len(tiles0),
+        len(tiles1))
+    log.debug("tile_sets: %d memberships -> %d sets", planes.nnz, len(plane))
+    return TileSets(plane, tile0, tile1, indptr, indices, len(table))
 
 
 def _greedy_cover(sets: TileSets, group: np.ndarray, weights: np.ndarray | None, q: int) -> np.ndarray:
