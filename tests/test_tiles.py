@@ -64,7 +64,15 @@ def test_tile_sets_exact():
         (1, last, last): {2},
     }
     assert got == expected
-    assert ts.n_matches == 4 and np.all(np.diff(ts.plane) >= 0)
+    assert ts.n_matches == 4
+    keys = list(zip(ts.plane.tolist(), ts.tile0.tolist(), ts.tile1.tolist()))
+    assert keys == sorted(keys)  # sets by (l, c, c'), matches ascending within each
+    assert all(np.all(np.diff(ts.members(s)) > 0) for s in range(len(ts)))
+    # restrict: the same sets, each without the dropped match 1 (possibly empty)
+    kept = ts.restrict(np.array([True, False, True, True]))
+    assert [k for k in zip(kept.plane.tolist(), kept.tile0.tolist(), kept.tile1.tolist())] == keys
+    assert _as_sets(kept) == [m - {1} for m in _as_sets(ts)]
+    assert kept.sizes().tolist() == [len(m - {1}) for m in _as_sets(ts)]
 
 
 def test_best_sets_per_tile_pair_is_coverage_greedy():

@@ -171,8 +171,9 @@ class TileSets:
 
     def restrict(self, keep: np.ndarray) -> TileSets:
         """Every set intersected with the (M,) bool ``keep`` (same sets, possibly empty)."""
-        mat = self.matrix().multiply(sp.csr_matrix(np.asarray(keep, bool)[None])).tocsr()
-        return TileSets.from_csr(mat, self.plane, self.tile0, self.tile1)
+        kept = np.asarray(keep, bool)[self.indices]
+        before = np.r_[0, np.cumsum(kept)]  # kept entries before each entry
+        return TileSets(self.plane, self.tile0, self.tile1, before[self.indptr], self.indices[kept], self.n_matches)
 
 
 def tile_sets(table: MatchTable, planes: sp.csr_matrix, tiles0: list[Block], tiles1: list[Block]) -> TileSets:
