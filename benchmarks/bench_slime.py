@@ -28,7 +28,9 @@ corner twice at sub-pixel offsets, which the final exact-duplicate merge keeps).
 Memory: "peak_rss_mb" = the process's resident-set high-water mark during the call (VmHWM, reset before
 it through /proc/self/clear_refs), "workers_maxrss_mb" = the largest resident set of any forked block-pair
 worker so far in this process (RUSAGE_CHILDREN cannot be reset; pages shared with the parent included),
-"cuda_peak_mb" = torch's allocator peak during the call. No pytest test times anything: this script
+"cuda_peak_mb" = torch's allocator peak during the call. Forks: "fork_ms_after_warm_up" = the time this process
+takes to fork a child (Slime's workers are forked; on a GPU machine with a CUDA context a fork took 25 ms),
+with the kernel's transparent huge page mode. No pytest test times anything: this script
 is the timing record, run once on a quiet machine where possible (load average recorded).
 """
 
@@ -119,6 +121,35 @@ def _reset_peak() -> None:
 def _children_maxrss_mb() -> float:
     kb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     return kb / 2**20 if sys.platform == "darwin" else kb / 1024
+
+
+def fork_cost_ms(rounds: int = 5) -> float | None:
+    """Median ms for this process to fork a child that exits at once (None without ``os.fork``).
+
+    Slime's workers are forked processes, and a fork copies the parent's page tables: its cost grows with the
+    parent's resident set and mappings (an H100 session measured 25 ms a fork in a process holding a CUDA
+    context, 62 forks a call), and huge pages (``transparent_hugepage``) cut it.
+    """
+    if not hasattr(os, "fork"):
+        return None
+    times = []
+    for _ in range(rounds):
+        start = time.perf_counter()
+        pid = os.fork()
+        if pid == 0:
+            os._exit(0)
+        times.append(time.perf_counter() - start)
+        os.waitpid(pid, 0)
+    return round(float(np.median(times)) * 1e3, 2)
+
+
+def transparent_hugepage() -> str | None:
+    """The kernel's transparent huge page mode (the bracketed word of its sysfs setting), None off Linux."""
+    try:
+        text = Path("/sys/kernel/mm/transparent_hugepage/enabled").read_text()
+    except OSError:
+        return None
+    return text[text.find("[") + 1:text.find("]")] if "[" in text else text.strip()
 
 
 def distinct_matches(xy0: np.ndarray, xy1: np.ndarray, radius: float = 1.0) -> int:
@@ -293,6 +324,11 @@ def main(argv: list[str] | None = None) -> dict:
     }
     print(f"device {report['meta']['device']}, load average {report['meta']['load_average_start']}")
     report["meta"]["warm_up_s"] = warm_up(pairs["640x480"], args.device, {"descriptor": args.descriptor})
+    report["meta"]["transparent_hugepage"] = transparent_hugepage()
+    report["meta"]["fork_ms_after_warm_up"] = fork_cost_ms()
+    print(f"fork of this process: {report['meta']['fork_ms_after_warm_up']} ms "
+          f"(transparent huge pages: {report['meta']['transparent_hugepage']}, resident set "
+          f"{_status_mb('VmRSS') or 0:.0f} MB)")
     runs = report["runs"]
     for size in sizes:
         key = "slime_cuda_640x480" if args.device == "cuda" and size == "640x480" else f"slime_learned_{size}"

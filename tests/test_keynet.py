@@ -53,6 +53,17 @@ def test_keynet_features_and_fixed_orientation(graf_small):
     assert torch.allclose(fixed.xy, features.xy) and torch.isfinite(fixed.descriptors).all()
     regions = pipeline.detect_regions(context)
     assert torch.equal(regions.shape_laf, features.shape_laf) and regions.descriptors.shape == (len(features), 0)
+    assert not pipeline.own_frames_upright()
+
+
+def test_upright_keynet_fixed_descriptors_at_angle_0_are_its_own(graf_small):
+    """What lets Slime reuse an upright base's first block-pair run for Sec. 3.3 (``own_frames_upright``)."""
+    pipeline = KeyNetPipeline(BaseConfig(name="keynet", descriptor="tfeat", upright=True), torch.device("cpu"))
+    context = pipeline.prepare(graf_small[0])
+    features = pipeline.detect(context)
+    fixed = pipeline.describe_fixed(context, features, 0.0)
+    assert pipeline.own_frames_upright() and len(features) > 50
+    assert torch.equal(fixed.laf, features.laf) and torch.equal(fixed.descriptors, features.descriptors)
 
 
 def test_keynet_descriptors_follow_kornia_patch_convention(graf_small):

@@ -26,6 +26,7 @@ from slime_match.slime.block_matching import (
     describe_fixed_bins,
     fixed_features,
     fork_map,
+    match_block_pairs,
     match_jobs,
     merge_keypoints,
     ransac_batches,
@@ -288,3 +289,31 @@ def test_detection_choices_are_validated():
         make_config("slime-keynet", tile_detection="merged")
     with pytest.raises(ValueError, match="detection must be one of"):
         LevelRequest(np.zeros((8, 8, 3)), [], detection="tile")
+
+
+def test_upright_base_reuses_the_first_run_for_the_orientation_refined_one(monkeypatch):
+    """On an upright base, the fixed frames and descriptors at angle 0 are the features' own, bit for bit, so
+    Sec. 3.3's re-run of a theta* = 0 pair repeats the first run: its matches are reused (no descriptors, no
+    re-match), and the planes equal those of the re-run done in full."""
+    image, _ = _squares()
+    moved = cv2.warpAffine(image, np.float32([[1, 0, 6], [0, 1, 4]]), SIZE[::-1], borderMode=cv2.BORDER_REFLECT)
+    upright = make_base_pipeline(BaseConfig(**{**WEIGHT_FREE, "orientation": "upright"}))
+    assert upright.own_frames_upright() and not make_base_pipeline(BaseConfig(**WEIGHT_FREE)).own_frames_upright()
+    context = upright.prepare(image)
+    own = upright.detect(context)
+    fixed = upright.describe_fixed(context, own.subset(torch.arange(3, len(own))), 0.0)
+    assert torch.equal(fixed.laf, own.laf[3:]) and torch.equal(fixed.descriptors, own.descriptors[3:])
+
+    blocks = [b for b in make_blocks(*SIZE) if b.scale_index == 0]
+
+    def planes():
+        levels0, levels1 = build_levels(upright, image, blocks), build_levels(upright, moved, blocks)
+        return match_block_pairs(upright, levels0, levels1, blocks, blocks, HomographyRansacConfig(threshold=15.0))
+
+    reused, counts = planes()
+    monkeypatch.setattr(upright, "own_frames_upright", lambda: False)
+    full, full_counts = planes()
+    assert counts["block_planes"] > 0 and counts["block_pairs_rerun"] == 0
+    assert full_counts["block_pairs_rerun"] == full_counts["block_planes_first"] == counts["block_planes_first"]
+    for field in dataclasses.fields(full):
+        np.testing.assert_array_equal(getattr(reused, field.name), getattr(full, field.name))

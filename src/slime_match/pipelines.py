@@ -119,6 +119,11 @@ class BasePipeline:
     def describe_fixed(self, context: Any, features: Features, angle: float) -> Features:
         raise NotImplementedError
 
+    def own_frames_upright(self) -> bool:
+        """Whether ``describe_fixed`` at angle 0 gives exactly (bit for bit) the frames and descriptors that
+        ``detect`` and ``describe_keypoints`` gave the features (an upright pipeline's own orientation)."""
+        return False
+
     def match(self, features0: Features, features1: Features, size0: tuple[int, int],
               size1: tuple[int, int], candidate_filter: CandidateFilter | None = None) -> Matches:
         """Matches of two feature sets of images of (H, W) ``size0`` / ``size1``.
@@ -187,6 +192,10 @@ class HzPlusPipeline(BasePipeline):
 
     def describe_fixed(self, context: HzContext, features: Features, angle: float) -> Features:
         return self.extractor.describe_fixed(context.pyramid, features.shape_laf, angle)
+
+    def own_frames_upright(self) -> bool:
+        # upright frames are the shape frames at angle 0, described by the same descriptor
+        return self.patch.orientation == "upright"
 
     def match(self, features0, features1, size0, size1, candidate_filter=None) -> Matches:
         if len(features0) == 0 or len(features1) == 0:
@@ -384,6 +393,9 @@ class KeyNetPipeline(BasePipeline):
         if len(features) == 0:
             return _empty_features(128, self.device)
         return self.extractor.describe_fixed(context.pyramid, features.shape_laf, angle)
+
+    def own_frames_upright(self) -> bool:
+        return self.patch.orientation == "upright"  # as for Hz+
 
     def load_kernels(self) -> None:
         if self.device.type == "cpu":

@@ -489,7 +489,9 @@ def match_block_pairs(
     fixed orientations (theta = 0 in image 0, theta* in image 1) + RANSAC -> M_l and H_l.
 
     Returns:
-        The refined planes and their matches, and counts for the summary.
+        The refined planes and their matches, and counts for the summary: block pairs, first-run planes,
+        pairs re-matched under fixed orientations (on an upright base none: the first run's matches are
+        reused, ``BasePipeline.own_frames_upright``) and refined planes.
     """
     where0 = {w: (lv, i) for lv in levels0 for i, w in enumerate(lv.blocks)}
     where1 = {w: (lv, i) for lv in levels1 for i, w in enumerate(lv.blocks)}
@@ -528,6 +530,10 @@ def match_block_pairs(
     # 3.3: re-run with fixed orientations on the pairs that produced a plane.
     refined_pairs = list(thetas)
     bin_of = {pair: orientation_bin(theta, bins) for pair, theta in thetas.items()}
+    upright = pipeline.own_frames_upright()
+    if upright:  # the features' own descriptors are those of bin 0 (angle 0): cache them as such
+        for level in (*levels0, *levels1):
+            level.fixed.setdefault(0, (np.ones(len(level.features), bool), level.features.descriptors))
 
     requests0: dict[int, dict[int, list]] = {}
     requests1: dict[int, dict[int, list]] = {}
@@ -555,7 +561,13 @@ def match_block_pairs(
         pair = refined_pairs[k]
         return fixed0(pair), fixed1(pair), blocks0[pair[0]], blocks1[pair[1]], None
 
-    second = match_jobs(pipeline, len(refined_pairs), fixed_job, _pair_workers(len(refined_pairs), workers))
+    # On an upright base a pair with theta* = 0 (all of them: every angle is 0) would match exactly as in the
+    # first run: its matches are reused, and only its RANSAC runs again.
+    first_of = {pair: k for k, pair in enumerate(pairs)}
+    repeats = [upright and bin_of[pair] == 0 for pair in refined_pairs]
+    redo = [k for k, repeat in enumerate(repeats) if not repeat]
+    rerun = iter(match_jobs(pipeline, len(redo), lambda j: fixed_job(redo[j]), _pair_workers(len(redo), workers)))
+    second = [first[first_of[pair]] if repeat else next(rerun) for pair, repeat in zip(refined_pairs, repeats)]
     results = ransac_batches([(xy0, xy1) for _, xy0, xy1 in second], ransac, seed + 1, workers)
 
     keep_pairs, hs, theta_out, parts = [], [], [], []
@@ -568,7 +580,8 @@ def match_block_pairs(
         hs.append(res.model)
         theta_out.append(bin_of[pair] * 2 * math.pi / bins)
         parts.append((len(keep_pairs) - 1, f0, f1, m_in))
-    counts = {"block_pairs": len(pairs), "block_planes_first": len(thetas), "block_planes": len(keep_pairs)}
+    counts = {"block_pairs": len(pairs), "block_planes_first": len(thetas), "block_pairs_rerun": len(redo),
+              "block_planes": len(keep_pairs)}
     return _collect(keep_pairs, hs, theta_out, parts), counts
 
 
