@@ -234,6 +234,30 @@ def test_fuse_planes_by_iou():
     assert fused.plane.tolist() == [0, 2]
 
 
+def test_fuse_planes_matches_the_definition_on_random_weighted_sets():
+    """Against the definition, set by set: F^{l*}_v = the selected set and every pool set of its tile pair
+    with weighted IoU > t_ov (empty sets included, a selected set absent from the pool)."""
+    g = np.random.default_rng(5)
+    n = 60
+    rows = [g.choice(n, g.integers(0, 25), replace=False) for _ in range(40)]
+    pool = _sets(rows, n, tile0=g.integers(0, 3, 40), tile1=g.integers(0, 3, 40))
+    w = g.integers(1, 4, n).astype(np.float64)
+    selected = pool.subset([0, 3, 7, 11, 19]).restrict(np.arange(n) != 5)
+    fused = fuse_planes(pool, selected, w, t_ov=0.2)
+    members = _as_sets(pool)
+    for k, s in enumerate(_as_sets(selected)):
+        expected = set(s)
+        for t in range(len(pool)):
+            same_pair = (pool.tile0[t], pool.tile1[t]) == (selected.tile0[k], selected.tile1[k])
+            inter = sum(w[m] for m in s & members[t])
+            union = sum(w[m] for m in s | members[t])
+            if same_pair and inter > 0 and inter / union > 0.2:
+                expected |= members[t]
+        assert _as_sets(fused)[k] == expected
+    assert any(len(f) > len(s) for f, s in zip(_as_sets(fused), _as_sets(selected)))
+    np.testing.assert_array_equal(fused.plane, selected.plane)
+
+
 def test_global_orientation_filter_drops_rotated_plane():
     rng = np.random.default_rng(0)
     m = 90

@@ -32,7 +32,7 @@ from slime_match.errors import ConfigError
 from slime_match.slime.blocks import Block, points_in_blocks
 from slime_match.slime.epipolar_kernels import epipolar_votes
 from slime_match.slime.planes import MatchTable, group_relative_orientation, wrap_angle
-from slime_match.slime.tile_kernels import greedy_cover, tile_pair_sets
+from slime_match.slime.tile_kernels import fused_sets, greedy_cover, tile_pair_sets
 
 __all__ = [
     "TileConfig",
@@ -519,17 +519,10 @@ def fuse_planes(
         One fused set per selected set, with its plane and tile labels.
     """
     w = np.ones(pool.n_matches) if weights is None else np.asarray(weights, np.float64)
-    b = pool.matrix().astype(np.float64)
-    inter = (selected.matrix(w) @ b.T).tocoo()  # (ns, S) weighted |F_s & F_t|
     n_tiles1 = int(max(pool.tile1.max(initial=0), selected.tile1.max(initial=0))) + 1
-    key_s = selected.tile0 * n_tiles1 + selected.tile1
-    key_p = pool.tile0 * n_tiles1 + pool.tile1
-    i, j, v = inter.row, inter.col, inter.data
-    iou = v / (selected.sizes(w)[i] + pool.sizes(w)[j] - v)
-    ok = (key_s[i] == key_p[j]) & (iou > t_ov)
-    z = sp.csr_matrix((np.ones(int(ok.sum())), (i[ok], j[ok])), shape=(len(selected), len(pool)))
-    fused = (z @ b) + selected.matrix().astype(np.float64)  # the set itself even if absent from the pool
-    return TileSets.from_csr(fused, selected.plane, selected.tile0, selected.tile1)
+    indptr, indices = fused_sets(selected.indptr, selected.indices, selected.tile0 * n_tiles1 + selected.tile1,
+                                 pool.indptr, pool.indices, pool.tile0 * n_tiles1 + pool.tile1, w, float(t_ov))
+    return TileSets(selected.plane, selected.tile0, selected.tile1, indptr, indices, selected.n_matches)
 
 
 def global_orientation_filter(
