@@ -171,9 +171,9 @@ class TileSets:
 
     def restrict(self, keep: np.ndarray) -> TileSets:
         """Every set intersected with the (M,) bool ``keep`` (same sets, possibly empty)."""
-        kept = np.asarray(keep, bool)[self.indices]
-        before = np.r_[0, np.cumsum(kept)]  # kept entries before each entry
-        return TileSets(self.plane, self.tile0, self.tile1, before[self.indptr], self.indices[kept], self.n_matches)
+        kept = np.flatnonzero(np.asarray(keep, bool)[self.indices])  # positions of the kept entries
+        return TileSets(self.plane, self.tile0, self.tile1, np.searchsorted(kept, self.indptr), self.indices[kept],
+                        self.n_matches)
 
 
 def tile_sets(table: MatchTable, planes: sp.csr_matrix, tiles0: list[Block], tiles1: list[Block]) -> TileSets:
