@@ -563,11 +563,11 @@ def match_block_pairs(
 
     # On an upright base a pair with theta* = 0 (all of them: every angle is 0) would match exactly as in the
     # first run: its matches are reused, and only its RANSAC runs again.
-    first_of = {pair: k for k, pair in enumerate(pairs)}
     repeats = [upright and bin_of[pair] == 0 for pair in refined_pairs]
     redo = [k for k, repeat in enumerate(repeats) if not repeat]
     rerun = iter(match_jobs(pipeline, len(redo), lambda j: fixed_job(redo[j]), _pair_workers(len(redo), workers)))
-    second = [first[first_of[pair]] if repeat else next(rerun) for pair, repeat in zip(refined_pairs, repeats)]
+    second = [first[w0 * len(blocks1) + w1] if repeat else next(rerun)  # ``pairs`` order
+              for (w0, w1), repeat in zip(refined_pairs, repeats)]
     results = ransac_batches([(xy0, xy1) for _, xy0, xy1 in second], ransac, seed + 1, workers)
 
     keep_pairs, hs, theta_out, parts = [], [], [], []
