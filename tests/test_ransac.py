@@ -1,6 +1,7 @@
 """Synthetic RANSAC checks: known H / F among 50% outliers, degenerate inputs, determinism, backends."""
 
 import itertools
+import sys
 
 import numpy as np
 import pytest
@@ -205,3 +206,13 @@ def test_backends_recover_known_models(backend):
     _check_fundamental(res, x0, x1, gt)
     res = estimate_geometry(x0[:7], x1[:7], "fundamental", backend)
     assert res.model is None and res.inliers.shape == (7,) and not res.inliers.any()
+
+
+def test_poselib_backend_without_poselib_is_a_clear_error(monkeypatch):
+    """PoseLib is optional (the "poselib" extra): without it the package imports and the other backends run."""
+    monkeypatch.setitem(sys.modules, "poselib", None)  # import poselib -> ImportError
+    rng = np.random.default_rng(3)
+    x0, x1, gt = _homography_problem(rng, 200)
+    _check_homography(estimate_geometry(x0, x1, "homography", "slime", threshold=3.0), x0, gt)
+    with pytest.raises(ConfigError, match="slime-match\\[poselib\\]"):
+        estimate_geometry(x0, x1, "homography", "poselib", threshold=3.0)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-import poselib
 
 from slime_match.errors import ConfigError
 from slime_match.geometry.ransac import (
@@ -41,6 +40,11 @@ def _poselib(
     x0: np.ndarray, x1: np.ndarray, kind: str, threshold: float, seed: int
 ) -> tuple[np.ndarray | None, np.ndarray]:
     """PoseLib LO-RANSAC + non-linear refinement (H: one-sided error in image 1; F: Sampson error)."""
+    try:
+        import poselib  # an optional dependency: the package's "poselib" extra
+    except ImportError as error:
+        raise ConfigError("the poselib RANSAC backends need PoseLib: pip install 'slime-match[poselib]' (or "
+                          "poselib), or choose --ransac homography|fundamental|magsac-...") from error
     opt = {"seed": int(seed), "max_iterations": _MAX_ITERATIONS}
     if kind == "homography":
         model, info = poselib.estimate_homography(x0, x1, {**opt, "max_reproj_error": threshold}, {})
