@@ -25,15 +25,14 @@ from slime_match.slime.block_matching import (
     build_levels_many,
     describe_fixed_bins,
     fixed_features,
-    fork_map,
     match_block_pairs,
     match_jobs,
     merge_keypoints,
     ransac_batches,
-    torch_threads,
     translate_features,
 )
 from slime_match.slime.blocks import make_blocks, points_in_blocks, resize_lanczos
+from slime_match.slime.forking import fork_map, torch_threads
 from slime_match.types import Features
 
 WEIGHT_FREE = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift"}

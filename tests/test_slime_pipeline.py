@@ -16,8 +16,9 @@ from slime_match.eval.metrics import correct_matches_homography
 from slime_match.geometry.homography import project
 from slime_match.io import load_image
 from slime_match.matcher import Matcher
-from slime_match.slime.block_matching import BlockPairMatches, device_workers, orientation_bin, torch_threads
+from slime_match.slime.block_matching import BlockPairMatches, device_workers, orientation_bin
 from slime_match.slime.blocks import make_blocks, make_tiles
+from slime_match.slime.forking import torch_threads
 from slime_match.slime.pipeline import (
     MANY_BLOCK_PAIRS,
     _workers,

@@ -23,10 +23,7 @@ import functools
 import itertools
 import logging
 import math
-import multiprocessing
-import signal
 from collections.abc import Callable
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -39,25 +36,10 @@ from ..pipelines import BasePipeline, CandidateFilter
 from ..types import Features, Keypoints, Matches
 from .blocks import Block, points_in_blocks, resize_lanczos
 from .clusters import greedy_clusters
+from .forking import fork_map, torch_threads
 from .planes import relative_orientation
 
 logger = logging.getLogger("slime_match")
-
-
-@contextmanager
-def torch_threads(count: int):
-    """Run a block with ``count`` intra-op torch threads (restored afterwards).
-
-    Slime's block-pair and tile loops are thousands of tiny tensor ops: with several threads each op pays a
-    thread hand-off that costs far more than the op (measured: Blob matching of 450 x 450 descriptors
-    9 ms with 1 thread, 140 ms with 2 on a loaded 2-core machine).
-    """
-    previous = torch.get_num_threads()
-    torch.set_num_threads(count)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(previous)
 
 
 @dataclass
@@ -379,35 +361,6 @@ def to_block_frame(features: Features, block: Block) -> Features:
     return translate_features(features, (-block.box[0], -block.box[1]))
 
 
-_FORK_TASK: Callable[[int], Any] | None = None  # set just before forking workers, read by _run_chunk in the children
-
-
-def _run_chunk(bounds: tuple[int, int]) -> list:
-    torch.set_num_threads(1)
-    return [_FORK_TASK(k) for k in range(*bounds)]
-
-
-def fork_map(fn: Callable[[int], Any], count: int, workers: int, chunks: int) -> list:
-    """``[fn(0), ..., fn(count - 1)]``, in ``workers`` forked processes when > 1.
-
-    The children inherit ``fn`` and its data by fork (nothing is pickled but the results); each runs
-    single-threaded torch, and takes ``count / chunks`` consecutive calls at a time.
-    """
-    global _FORK_TASK
-    if workers <= 1 or count < 2 or "fork" not in multiprocessing.get_all_start_methods():
-        return [fn(k) for k in range(count)]
-    edges = np.linspace(0, count, min(chunks, count) + 1).astype(int)
-    _FORK_TASK = fn
-    try:
-        # Ctrl-C is the parent's to handle: leaving the block terminates the children
-        with multiprocessing.get_context("fork").Pool(min(workers, count), initializer=signal.signal,
-                                                      initargs=(signal.SIGINT, signal.SIG_IGN)) as pool:
-            parts = pool.map(_run_chunk, list(itertools.pairwise(edges)), chunksize=1)
-    finally:
-        _FORK_TASK = None
-    return [result for part in parts for result in part]
-
-
 def uses_cuda(pipeline: BasePipeline) -> bool:
     """Whether the pipeline computes on a CUDA device (forked processes cannot use CUDA)."""
     device = getattr(pipeline, "device", None)
@@ -618,7 +571,6 @@ __all__ = [
     "describe_fixed_bins",
     "device_workers",
     "fixed_features",
-    "fork_map",
     "match_block_pairs",
     "match_jobs",
     "orientation_bin",

@@ -27,9 +27,9 @@ from .block_matching import (
     LevelRequest,
     build_levels_many,
     match_block_pairs,
-    torch_threads,
 )
 from .blocks import Block, BlockConfig, make_blocks, make_tiles
+from .forking import torch_threads
 from .planes import MatchTable, PlaneConfig, deduplicate, expand_planes
 from .refine import FlowGuide, global_dtm, match_tiles, merge_duplicates
 from .tiles import (
