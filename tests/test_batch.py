@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from conftest import run_cli
 
-from slime_match.batch import _interrupted, match_pairs, read_pairs
+from slime_match.batch import match_pairs, read_pairs
 from slime_match.config import make_config
 from slime_match.errors import ConfigError, ImageError
 
@@ -55,17 +55,6 @@ def test_read_pairs_errors(images, tmp_path, text, error, words):
     assert words in str(info.value)
     with pytest.raises(ConfigError, match="cannot read the pairs file"):
         read_pairs(tmp_path / "absent.txt", images)
-
-
-def test_interrupted_sees_the_cause_chain():
-    try:
-        try:
-            raise KeyboardInterrupt
-        except KeyboardInterrupt as inner:
-            raise SystemError("wrapped by a compiled function") from inner
-    except SystemError as error:
-        assert _interrupted(error)
-    assert not _interrupted(ValueError("plain"))
 
 
 def test_pairs_run_resume_failures_and_config_guard(images, tmp_path, capsys):

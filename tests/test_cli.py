@@ -7,7 +7,11 @@ import numpy as np
 import pytest
 from conftest import run_cli
 
+import slime_match.matcher
 from slime_match.cli import main
+from slime_match.config import make_config
+from slime_match.errors import caused_by_interrupt
+from slime_match.matcher import Matcher
 from slime_match.slime.refine import global_dtm
 
 WEIGHT_FREE = ["--shape", "baumberg", "--orientation", "gradient", "--descriptor", "rootsift"]
@@ -173,3 +177,27 @@ def test_demo_scores_the_real_pair(tmp_path, capsys):
     assert code == 0, err
     gt = json.loads((tmp_path / "summary.json").read_text())["ground_truth"]
     assert gt["precision"] > 0.8 and "precision" in out
+
+
+def _interrupted_in_compiled_code(*args, **kwargs):
+    """What numba raises when Ctrl-C arrives inside a compiled function."""
+    try:
+        raise KeyboardInterrupt
+    except KeyboardInterrupt as inner:
+        raise SystemError("CPUDispatcher(...) returned a result with an exception set") from inner
+
+
+def test_caused_by_interrupt_follows_the_cause_chain():
+    with pytest.raises(SystemError) as info:
+        _interrupted_in_compiled_code()
+    assert caused_by_interrupt(info.value)
+    assert not caused_by_interrupt(ValueError("plain"))
+
+
+def test_ctrl_c_inside_compiled_code_is_an_interruption(pair, tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(slime_match.matcher, "run_slime", _interrupted_in_compiled_code)
+    with pytest.raises(KeyboardInterrupt):  # the API raises what the user pressed
+        Matcher(make_config("slime", shape="baumberg", orientation="gradient", descriptor="rootsift"))(*pair)
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "out", *WEIGHT_FREE)
+    assert code == 130 and err.strip() == "interrupted"
+    assert not (tmp_path / "out").exists()

@@ -204,23 +204,10 @@ def _match_one(matcher: Matcher, job: PairJob, out: Path, plot: bool) -> dict[st
     except ImageError as error:
         return _record(job, "failed", seconds=round(time.perf_counter() - start, 4), error=str(error))
     except Exception as error:  # one pair must not end a long run; the record says what happened
-        if _interrupted(error):  # numba re-raises a Ctrl-C inside compiled code as a SystemError
-            raise KeyboardInterrupt from error
         logger.exception("pair %s %s failed", job.name0, job.name1)
         return _record(job, "failed", seconds=round(time.perf_counter() - start, 4),
                        error=f"{type(error).__name__}: {error}")
     return _record(job, "done", len(result), result.summary["seconds"]["total"])
-
-
-def _interrupted(error: BaseException) -> bool:
-    """Whether a KeyboardInterrupt is among the causes of ``error``."""
-    seen = set()
-    while error is not None and id(error) not in seen:
-        if isinstance(error, KeyboardInterrupt):
-            return True
-        seen.add(id(error))
-        error = error.__cause__ or error.__context__
-    return False
 
 
 def _match_in_pool(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool, workers: int

@@ -8,7 +8,7 @@ import logging
 import sys
 from pathlib import Path
 
-from .errors import SlimeMatchError
+from .errors import SlimeMatchError, caused_by_interrupt
 
 logger = logging.getLogger("slime_match")
 
@@ -225,6 +225,9 @@ def main(argv: list[str] | None = None) -> int:
         print("interrupted", file=sys.stderr)
         return 130
     except Exception as error:
+        if caused_by_interrupt(error):
+            print("interrupted", file=sys.stderr)
+            return 130
         if args.debug:
             raise
         print(f"error: {type(error).__name__}: {error} (rerun with --debug for details)", file=sys.stderr)

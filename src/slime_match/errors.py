@@ -15,3 +15,15 @@ class WeightsNotFoundError(SlimeMatchError):
 
 class ConfigError(SlimeMatchError, ValueError):
     """An unknown method/option name or an invalid parameter value."""
+
+
+def caused_by_interrupt(error: BaseException) -> bool:
+    """Whether a KeyboardInterrupt is among the causes of ``error``: numba re-raises a Ctrl-C that arrives
+    inside compiled code as a SystemError whose context is the KeyboardInterrupt."""
+    seen = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, KeyboardInterrupt):
+            return True
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return False

@@ -11,7 +11,7 @@ import torch
 
 from . import __version__
 from .config import MatchConfig, make_config
-from .errors import ConfigError, ImageError
+from .errors import ConfigError, ImageError, caused_by_interrupt
 from .features.descriptors import resolve_descriptor
 from .geometry.backends import estimate_geometry
 from .io import MIN_IMAGE_SIDE, ImageLike, load_image
@@ -56,6 +56,14 @@ class Matcher:
 
     def __call__(self, image0: ImageLike, image1: ImageLike) -> MatchResult:
         """Match two images (paths, numpy arrays or torch tensors); see :func:`slime_match.match`."""
+        try:
+            return self._match(image0, image1)
+        except Exception as error:
+            if caused_by_interrupt(error):  # a Ctrl-C inside compiled code surfaces as a SystemError
+                raise KeyboardInterrupt from error
+            raise
+
+    def _match(self, image0: ImageLike, image1: ImageLike) -> MatchResult:
         timer = StageTimer()
         start = time.perf_counter()
         config = self.config
