@@ -25,10 +25,9 @@ def _gone(pids) -> bool:
     return True
 
 
-@pytest.mark.parametrize(("count", "workers", "chunks"), [(0, 4, 8), (1, 4, 8), (11, 2, 3), (11, 2, 40),
-                                                          (50, 5, 17), (64, 8, 64), (7, 16, 7)])
-def test_fork_map_equals_the_serial_map(count, workers, chunks):
-    out = fork_map(lambda k: (k * k, os.getpid()), count, workers, chunks)
+@pytest.mark.parametrize(("count", "workers"), [(0, 4), (1, 4), (11, 2), (50, 5), (64, 8), (7, 16)])
+def test_fork_map_equals_the_serial_map(count, workers):
+    out = fork_map(lambda k: (k * k, os.getpid()), count, workers)
     assert [square for square, _ in out] == [k * k for k in range(count)]
     assert _gone({pid for _, pid in out} - {CALLER})
 
@@ -40,7 +39,7 @@ def test_the_caller_and_its_children_all_compute_and_get_tensors_back():
         time.sleep(0.02)
         return os.getpid(), torch.full((3,), float(k)), torch.get_num_threads()
 
-    out = fork_map(fn, 40, 4, 40)
+    out = fork_map(fn, 40, 4)
     pids = {pid for pid, _, _ in out}
     assert CALLER in pids and len(pids) >= 3
     assert all(torch.equal(t, torch.full((3,), float(k))) for k, (_, t, _) in enumerate(out))
@@ -74,7 +73,7 @@ def test_an_error_in_a_child_is_raised_in_the_caller_with_its_traceback(tmp_path
         raise ValueError(f"bad item {k}")
 
     with pytest.raises(ValueError, match="bad item") as info:
-        fork_map(fn, 8, 2, 8)
+        fork_map(fn, 8, 2)
     assert isinstance(info.value.__cause__, RemoteTraceback)
     assert "raise ValueError" in str(info.value.__cause__)
     assert _gone(_children_seen(tmp_path))
@@ -89,7 +88,7 @@ def test_an_error_in_the_caller_stops_the_children(tmp_path):
         return k
 
     with pytest.raises(KeyError):
-        fork_map(fn, 20, 3, 20)
+        fork_map(fn, 20, 3)
     assert _gone(_children_seen(tmp_path))
 
 
@@ -102,7 +101,7 @@ def test_a_killed_child_is_an_error_not_a_hang(tmp_path):
         return k
 
     with pytest.raises(WorkerDied, match="ended without its results"):
-        fork_map(fn, 8, 2, 8)
+        fork_map(fn, 8, 2)
     assert _children_seen(tmp_path) and _gone(_children_seen(tmp_path))
 
 
@@ -111,4 +110,4 @@ def test_results_that_cannot_be_pickled_are_a_clear_error():
         return (lambda: k) if os.getpid() != CALLER else time.sleep(0.2)
 
     with pytest.raises(RuntimeError, match="could not be pickled"):
-        fork_map(fn, 8, 2, 8)
+        fork_map(fn, 8, 2)

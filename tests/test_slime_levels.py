@@ -165,7 +165,7 @@ def test_merge_keypoints_keeps_the_strongest_of_each_group_per_level():
 
 
 def test_fork_map_and_forked_descriptors_equal_one_process(levels):
-    assert fork_map(lambda k: k * k, 11, 2, 3) == [k * k for k in range(11)]
+    assert fork_map(lambda k: k * k, 11, 2) == [k * k for k in range(11)]
     pipeline, _, _, shared, _ = levels
     out = []
     for workers in (1, 2):

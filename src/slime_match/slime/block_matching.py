@@ -186,7 +186,7 @@ def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], work
 
     found: list[Any] = [None] * len(detections)
     with torch_threads(1):  # as in a worker: the same float rounding for any number of workers
-        for k, result in zip(order, fork_map(detect, len(order), workers, len(order))):
+        for k, result in zip(order, fork_map(detect, len(order), workers)):
             found[k] = result
     levels: list[list[ScaleLevel]] = [[] for _ in requests]
     for d, features in zip(detections, found):
@@ -219,7 +219,7 @@ def _merged_keypoints(pipeline: BasePipeline, levels: list[_Detection], requests
         xy = keypoints.xy.cpu().numpy() + np.array(block.box[:2], np.float32)
         return (xy, *(t.cpu().numpy() for t in (keypoints.ellipse, keypoints.response, keypoints.level)))
 
-    found = iter(fork_map(detect, len(crops), workers, len(crops)))
+    found = iter(fork_map(detect, len(crops), workers))
     return [merge_keypoints([next(found) for _ in d.blocks]) for d in levels]
 
 
@@ -305,7 +305,7 @@ def describe_fixed_bins(pipeline: BasePipeline, requests: list[tuple[ScaleLevel,
         fresh = pipeline.describe_fixed(level.context, regions, bin_index * 2 * math.pi / bins).descriptors
         return fresh.detach().cpu().numpy() if forked else fresh.detach()  # no device round trip in-process
 
-    for (level, bin_index, missing), fresh in zip(tasks, fork_map(describe, len(tasks), workers, len(tasks))):
+    for (level, bin_index, missing), fresh in zip(tasks, fork_map(describe, len(tasks), workers)):
         n, device = len(level.features), level.features.laf.device
         computed, descriptors = level.fixed.get(bin_index, (np.zeros(n, bool), None))
         if descriptors is None:
@@ -389,7 +389,7 @@ def match_jobs(pipeline: BasePipeline, count: int, job: Callable[[int], MatchJob
         Per pair: the matches, and the matched positions (K, 2) float64 in the features' level pixels.
     """
     if not uses_cuda(pipeline):
-        return fork_map(lambda k: _match_job(pipeline, job(k)), count, workers, 8 * workers)
+        return fork_map(lambda k: _match_job(pipeline, job(k)), count, workers)
     copies: dict[int, tuple[Features, Features]] = {}  # id -> (features, CPU copy): pairs share block features
 
     def on_cpu(features: Features) -> Features:
@@ -398,7 +398,7 @@ def match_jobs(pipeline: BasePipeline, count: int, job: Callable[[int], MatchJob
         return copies[id(features)][1]
 
     jobs = [None if j is None else (on_cpu(j[0]), on_cpu(j[1]), *j[2:]) for j in map(job, range(count))]
-    return fork_map(lambda k: _match_job(pipeline, jobs[k]), count, workers, 8 * workers)
+    return fork_map(lambda k: _match_job(pipeline, jobs[k]), count, workers)
 
 
 def _match_job(pipeline: BasePipeline, job: MatchJob | None) -> JobMatches:
@@ -422,7 +422,7 @@ def ransac_batches(problems: list[tuple[np.ndarray, np.ndarray]], config: Homogr
     (seed, b)), spread over ``workers`` forked processes; the same results for any number of workers."""
     starts = range(0, len(problems), RANSAC_BATCH)
     parts = fork_map(lambda b: ransac_homography_many(problems[starts[b]:starts[b] + RANSAC_BATCH], config,
-                                                      seed=[seed, b]), len(starts), workers, len(starts))
+                                                      seed=[seed, b]), len(starts), workers)
     return [result for part in parts for result in part]
 
 

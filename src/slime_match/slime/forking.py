@@ -8,8 +8,9 @@ on an H100 machine, where one call of Slime forked 62 times), so ``fork_map``:
 - computes in the caller too: ``workers`` processes take ``workers - 1`` forks;
 - forks the children as a binomial tree (every process forks further children right after its own start):
   the forks run in ceil(log2(workers)) rounds of concurrent forks instead of one after another;
-- hands out chunks of the work from a shared counter, and each child sends all its results once, when no
-  chunk is left, pickled by value through its own pipe.
+- hands out the calls one at a time from a counter in shared memory (the processes stay busy until the
+  last call), and each child sends all its results once, when no call is left, pickled by value through
+  its own pipe.
 """
 
 from __future__ import annotations
@@ -52,33 +53,31 @@ class WorkerDied(RuntimeError):
     """A forked worker ended without sending its results (killed, for example by the out-of-memory killer)."""
 
 
-def fork_map(fn: Callable[[int], Any], count: int, workers: int, chunks: int) -> list:
+def fork_map(fn: Callable[[int], Any], count: int, workers: int) -> list:
     """``[fn(0), ..., fn(count - 1)]``, computed by this process and ``workers - 1`` forked children.
 
-    Each process runs single-threaded torch and takes ``count / chunks`` consecutive calls at a time. An
-    exception raised by ``fn`` in a child is raised here again (its remote traceback as the cause).
+    Each process runs single-threaded torch and takes the next call as soon as it is free. An exception
+    raised by ``fn`` in a child is raised here again (its remote traceback as the cause).
     """
-    chunks = min(chunks, count)
-    size = min(workers, chunks)
+    size = min(workers, count)
     if size <= 1 or "fork" not in multiprocessing.get_all_start_methods():
         return [fn(k) for k in range(count)]
-    edges = [count * c // chunks for c in range(chunks + 1)]
     context = multiprocessing.get_context("fork")
-    taken = context.Value("l", 0)  # chunks handed out so far, in memory shared by the forks
+    taken = context.Value("l", 0)  # calls handed out so far, in memory shared by the forks
 
-    def run() -> list[tuple[int, list]]:
+    def run() -> list[tuple[int, Any]]:
         done = []
         while True:
             with taken.get_lock():
-                chunk = taken.value
+                k = taken.value
                 taken.value += 1
-            if chunk >= chunks:
+            if k >= count:
                 return done
-            done.append((chunk, [fn(k) for k in range(edges[chunk], edges[chunk + 1])]))
+            done.append((k, fn(k)))
 
     def stop() -> None:
         with taken.get_lock():
-            taken.value = chunks
+            taken.value = count
 
     pipes = [context.Pipe(duplex=False) for _ in range(size - 1)]  # rank r >= 1 writes to pipes[r - 1]
     children: list[int] = []
@@ -97,7 +96,7 @@ def fork_map(fn: Callable[[int], Any], count: int, workers: int, chunks: int) ->
             writer.close()
         for pid in children:
             os.waitpid(pid, 0)
-    return [result for _, part in sorted(parts, key=lambda p: p[0]) for result in part]
+    return [result for _, result in sorted(parts, key=lambda done: done[0])]
 
 
 def _tree_children(rank: int, size: int) -> list[int]:
@@ -134,7 +133,7 @@ def _fork_subtree(rank: int, size: int, pipes: list[tuple[Connection, Connection
 
 def _worker(rank: int, size: int, pipes: list[tuple[Connection, Connection]], run: Callable[[], list],
             stop: Callable[[], None]) -> None:
-    """A forked child: fork its subtree, run chunks, send their results, reap its children, exit."""
+    """A forked child: fork its subtree, run calls, send their results, reap its children, exit."""
     pids: list[int] = []
     code = 1
     try:
@@ -174,7 +173,7 @@ def _pickled(message: tuple) -> bytes:
                              traceback.format_exc()), pickle.HIGHEST_PROTOCOL)
 
 
-def _received(reader: Connection) -> list[tuple[int, list]]:
+def _received(reader: Connection) -> list[tuple[int, Any]]:
     """One child's results; its exception raised here, or WorkerDied if it sent nothing."""
     try:
         message = pickle.loads(reader.recv_bytes())
