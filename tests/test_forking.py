@@ -14,14 +14,19 @@ from slime_match.slime.forking import RemoteTraceback, WorkerDied, _subtree, _tr
 CALLER = os.getpid()
 
 
-def _gone(pids) -> bool:
-    """Whether none of the processes pids is left, not even as a zombie."""
+def _gone(pids, seconds: float = 10.0) -> bool:
+    """Whether none of the processes pids is left, not even as a zombie, within ``seconds`` (they are reaped
+    in the background)."""
+    deadline = time.monotonic() + seconds
     for pid in pids:
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            continue
-        return False
+        while True:
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                break
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.01)
     return True
 
 
