@@ -28,6 +28,8 @@ from slime_match.slime.block_matching import (
     match_block_pairs,
     match_jobs,
     merge_keypoints,
+    piece_size,
+    pieces_of,
     ransac_batches,
     translate_features,
 )
@@ -174,6 +176,40 @@ def test_fork_map_and_forked_descriptors_equal_one_process(levels):
         describe_fixed_bins(pipeline, wanted, 16, workers)
         out.append([fixed_features(lv, index, b, 16).descriptors for lv, bins in wanted for b, index in bins.items()])
     assert all(torch.equal(a, b) for a, b in zip(*out, strict=True))
+
+
+def test_pieces_cover_the_set_at_multiples_of_the_batch():
+    assert piece_size(10_000, 256, 1) == 10_000 and piece_size(10_000, None, 8) == 10_000
+    assert piece_size(0, 256, 1) == 1 and piece_size(100, 256, 16) == 256
+    assert piece_size(10_000, 256, 2) == 256 * 5  # about a quarter of an even share: 10,000 / 8 = 1250
+    for count, size in ((0, 256), (1, 256), (256, 256), (257, 256), (10_000, 1280)):
+        pieces = pieces_of(count, size)
+        assert [i for piece in pieces for i in range(count)[piece]] == list(range(count))
+        assert all(piece.start % size == 0 and piece.stop - piece.start <= size for piece in pieces)
+    assert pieces_of(0, 256) == [slice(0, 0)]
+
+
+@pytest.mark.parametrize("options", [{"descriptor": "tfeat"}, WEIGHT_FREE], ids=["networks", "weight-free"])
+def test_sets_described_in_pieces_equal_sets_described_whole(pair, options):
+    """Merged levels and fixed-orientation descriptors spread over 3 workers in pieces of the networks' batch
+    (256 keypoints): the features of one process, bit for bit."""
+    images = [cv2.resize(load_image(path), (320, 240), interpolation=cv2.INTER_AREA) for path in pair]
+    pipeline = make_base_pipeline(BaseConfig(**options))
+    blocks = [b for b in make_blocks(240, 320) if b.scale_index < 2]
+    requests = [LevelRequest(image, blocks, detection="merged") for image in images]
+    runs = []
+    for workers in (1, 3):
+        levels = [lv for found in build_levels_many(pipeline, requests, workers) for lv in found]
+        wanted = [(lv, {b: np.arange(0, len(lv.features), 1 + b % 3) for b in (0, 5, 11)}) for lv in levels]
+        describe_fixed_bins(pipeline, wanted, 16, workers)
+        runs.append([(lv.features, *(fixed_features(lv, index, b, 16).descriptors for b, index in bins.items()))
+                     for lv, bins in wanted])
+    total = sum(len(lv.features) for lv, _ in wanted)
+    assert max(len(lv.features) for lv, _ in wanted) > piece_size(total, pipeline.describe_batch(), 3)  # split
+    for (one, *fixed_one), (three, *fixed_three) in zip(*runs, strict=True):
+        for name in ("laf", "descriptors", "response", "shape_laf"):
+            assert torch.equal(getattr(one, name), getattr(three, name)), name
+        assert all(torch.equal(a, b) for a, b in zip(fixed_one, fixed_three, strict=True))
 
 
 def test_forked_detections_equal_one_process(levels):

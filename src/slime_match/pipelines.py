@@ -119,6 +119,13 @@ class BasePipeline:
     def describe_fixed(self, context: Any, features: Features, angle: float) -> Features:
         raise NotImplementedError
 
+    def describe_batch(self) -> int | None:
+        """The number of keypoints whose patches the patch stages process together. Describing a set in
+        pieces that start at multiples of it gives the set's features bit for bit (the same network batches,
+        and every elementwise op's vector lanes see the same values), so Slime may spread one set over its
+        workers. None: a set must be described whole."""
+        return None
+
     def own_frames_upright(self) -> bool:
         """Whether ``describe_fixed`` at angle 0 gives exactly (bit for bit) the frames and descriptors that
         ``detect`` and ``describe_keypoints`` gave the features (an upright pipeline's own orientation)."""
@@ -192,6 +199,9 @@ class HzPlusPipeline(BasePipeline):
 
     def describe_fixed(self, context: HzContext, features: Features, angle: float) -> Features:
         return self.extractor.describe_fixed(context.pyramid, features.shape_laf, angle)
+
+    def describe_batch(self) -> int | None:
+        return self.patch.batch_size  # the networks' batches; the compiled CPU patch loops go patch by patch
 
     def own_frames_upright(self) -> bool:
         # upright frames are the shape frames at angle 0, described by the same descriptor
@@ -393,6 +403,9 @@ class KeyNetPipeline(BasePipeline):
         if len(features) == 0:
             return _empty_features(128, self.device)
         return self.extractor.describe_fixed(context.pyramid, features.shape_laf, angle)
+
+    def describe_batch(self) -> int | None:
+        return self.patch.batch_size  # as for Hz+
 
     def own_frames_upright(self) -> bool:
         return self.patch.orientation == "upright"  # as for Hz+

@@ -4,8 +4,9 @@ Speed by design (the paper's SM "Slime running time"): keypoints, shapes and des
 once per image and block scale on the whole scaled image and shared by every block that contains the
 keypoint (a block owns the keypoints of its core, i.e. the block minus its 32 px padding); descriptors
 under a fixed orientation are computed once per (scale, orientation bin) and only for the keypoints that
-a block pair needs; RANSACs of all block pairs run as one batch; the detections, block pairs and RANSAC
-batches are spread over forked worker processes. Forked processes cannot use CUDA: on CUDA the networks run
+a block pair needs; RANSACs of all block pairs run as one batch; the detections, the descriptions (in pieces
+of keypoints, so that the workers finish together), block pairs and RANSAC batches are spread over forked
+worker processes. Forked processes cannot use CUDA: on CUDA the networks run
 in the main process, while the block crops' detector and the block and tile pairs run on the CPU in the
 workers (``uses_cuda``).  How blocks get their keypoints (``LevelRequest.detection``):
 
@@ -144,9 +145,9 @@ def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], work
     image, per block, or detected per block and described per scale (see ``LevelRequest``).
 
     The detections (one per image and scale, or per block; "merged": first the block crops' detectors, then
-    one description per image and scale) run in ``workers`` forked processes (one process on CUDA), the
-    largest first; each runs single-threaded torch, as in one process, so the features do not depend on
-    ``workers``.
+    the patch stages of each image and scale, in pieces of keypoints, see ``piece_size``) run in ``workers``
+    forked processes (one process on CUDA), the largest first; each runs single-threaded torch, as in one
+    process, so the features do not depend on ``workers``.
 
     Returns:
         Per request: "scale" and "merged" detection, one ScaleLevel per distinct block scale, in increasing
@@ -171,29 +172,59 @@ def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], work
             for d, (keypoints, members) in zip(merged, _merged_keypoints(pipeline, merged, requests, workers)):
                 d.context, d.keypoints, d.members = pipeline.prepare(d.scaled), keypoints.to(device), members
         detections += merged
-    order = sorted(range(len(detections)), key=lambda k: -detections[k].pixels)
     workers = device_workers(pipeline, workers)
     forked = workers > 1
+    # whole detections first, the largest first; then the merged levels' keypoints in pieces, the largest first
+    whole = sorted((k for k, d in enumerate(detections) if d.keypoints is None), key=lambda k: -detections[k].pixels)
+    size = piece_size(sum(len(d.keypoints) for d in merged), pipeline.describe_batch(), workers)
+    pieces = [(k, slice(0, None)) for k in whole] + sorted(
+        ((k, piece) for k, d in enumerate(detections) if d.keypoints is not None
+         for piece in pieces_of(len(d.keypoints), size)), key=lambda job: job[1].start - job[1].stop)
 
-    def detect(k: int) -> Features | tuple:
-        d = detections[order[k]]
+    def detect(j: int) -> Features | tuple:
+        k, piece = pieces[j]
+        d = detections[k]
         regions_only = requests[d.request].regions_only
         if d.keypoints is not None:
-            features = pipeline.describe_keypoints(d.context, d.keypoints, regions_only)
+            keypoints = d.keypoints.subset(torch.arange(piece.start, piece.stop, device=d.keypoints.xy.device))
+            features = pipeline.describe_keypoints(d.context, keypoints, regions_only)
         else:
             features = pipeline.detect_regions(d.context) if regions_only else pipeline.detect(d.context)
         return _features_to_numpy(features) if forked else features
 
-    found: list[Any] = [None] * len(detections)
     with torch_threads(1):  # as in a worker: the same float rounding for any number of workers
-        for k, result in zip(order, fork_map(detect, len(order), workers)):
-            found[k] = result
+        found = fork_map(detect, len(pieces), workers)
+    parts: list[list] = [[] for _ in detections]
+    for (k, piece), result in sorted(zip(pieces, found), key=lambda done: (done[0][0], done[0][1].start)):
+        parts[k].append(result)
     levels: list[list[ScaleLevel]] = [[] for _ in requests]
-    for d, features in zip(detections, found):
+    for d, part in zip(detections, parts):
         if forked:
-            features = _features_from_numpy(features, getattr(pipeline, "device", torch.device("cpu")))
+            features = _features_from_numpy(_joined(part), getattr(pipeline, "device", torch.device("cpu")))
+        else:
+            (features,) = part  # one piece a set in one process
         levels[d.request].append(_level(d, features, requests[d.request].blocks))
     return levels
+
+
+def piece_size(total: int, batch: int | None, workers: int) -> int:
+    """Keypoints per call when ``total`` keypoints are described by ``workers`` processes: about a quarter of
+    an even share (so that the processes finish together), a multiple of the pipeline's ``describe_batch``
+    (so that the features do not depend on ``workers``); all of them (no pieces) in one process or when the
+    pipeline must describe a set whole (``batch`` None)."""
+    if workers <= 1 or batch is None:
+        return max(total, 1)
+    return batch * max(1, math.ceil(total / (4 * workers * batch)))
+
+
+def pieces_of(count: int, size: int) -> list[slice]:
+    """``range(count)`` in consecutive slices of ``size`` (the last one shorter; one empty slice for 0)."""
+    return [slice(start, min(start + size, count)) for start in range(0, count, size)] or [slice(0, 0)]
+
+
+def _joined(parts: list[tuple[np.ndarray | None, ...]]) -> tuple[np.ndarray | None, ...]:
+    """The arrays of ``_features_to_numpy`` of consecutive pieces of one set, as those of the whole set."""
+    return tuple(None if column[0] is None else np.concatenate(column) for column in zip(*parts))
 
 
 def _merged_keypoints(pipeline: BasePipeline, levels: list[_Detection], requests: list[LevelRequest],
@@ -281,21 +312,23 @@ def describe_fixed_bins(pipeline: BasePipeline, requests: list[tuple[ScaleLevel,
         requests: (level, orientation bin -> indices of the level's features needed under that bin's angle),
             each level at most once. Each (level, bin) is described in one batched call, and only for features
             not already cached.
-        workers: forked processes sharing the calls (the same batches as in one process: same descriptors);
-            one process on CUDA.
+        workers: forked processes sharing the calls, each (level, bin) in pieces (``piece_size``: the same
+            descriptors as in one process); one process on CUDA.
     """
-    tasks = []
+    wanted_sets = []
     for level, wanted in requests:
         for bin_index, index in wanted.items():
             computed, _ = level.fixed.get(bin_index, (np.zeros(len(level.features), bool), None))
             missing = np.unique(index)
             missing = missing[~computed[missing]]
             if len(missing):
-                tasks.append((level, bin_index, missing))
-    tasks.sort(key=lambda task: -len(task[2]))  # the largest first: even loads over the workers
-
+                wanted_sets.append((level, bin_index, missing))
     workers = device_workers(pipeline, workers)
     forked = workers > 1
+    size = piece_size(sum(len(missing) for *_, missing in wanted_sets), pipeline.describe_batch(), workers)
+    tasks = [(level, bin_index, missing[piece]) for level, bin_index, missing in wanted_sets
+             for piece in pieces_of(len(missing), size)]
+    tasks.sort(key=lambda task: -len(task[2]))  # the largest first: even loads over the workers
 
     def describe(k: int) -> np.ndarray | torch.Tensor:
         level, bin_index, missing = tasks[k]
