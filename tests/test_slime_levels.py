@@ -20,7 +20,7 @@ from slime_match.pipelines import BaseConfig, make_base_pipeline
 from slime_match.slime.block_matching import (
     LevelRequest,
     _Detection,
-    _merged_keypoints,
+    _detected_keypoints,
     build_levels,
     build_levels_many,
     describe_fixed_bins,
@@ -33,7 +33,7 @@ from slime_match.slime.block_matching import (
     ransac_batches,
     translate_features,
 )
-from slime_match.slime.blocks import make_blocks, points_in_blocks, resize_lanczos
+from slime_match.slime.blocks import make_blocks, make_tiles, points_in_blocks, resize_lanczos
 from slime_match.slime.forking import fork_map, torch_threads
 from slime_match.types import Features
 
@@ -191,12 +191,13 @@ def test_pieces_cover_the_set_at_multiples_of_the_batch():
 
 @pytest.mark.parametrize("options", [{"descriptor": "tfeat"}, WEIGHT_FREE], ids=["networks", "weight-free"])
 def test_sets_described_in_pieces_equal_sets_described_whole(pair, options):
-    """Merged levels and fixed-orientation descriptors spread over 3 workers in pieces of the networks' batch
-    (256 keypoints): the features of one process, bit for bit."""
+    """Merged and "scale" levels (the tiles' regions) and fixed-orientation descriptors spread over 3 workers in
+    pieces of the networks' batch (256 keypoints): the features of one process, bit for bit."""
     images = [cv2.resize(load_image(path), (320, 240), interpolation=cv2.INTER_AREA) for path in pair]
     pipeline = make_base_pipeline(BaseConfig(**options))
     blocks = [b for b in make_blocks(240, 320) if b.scale_index < 2]
     requests = [LevelRequest(image, blocks, detection="merged") for image in images]
+    requests.append(LevelRequest(images[1], make_tiles(240, 320), regions_only=True, detection="scale"))
     runs = []
     for workers in (1, 3):
         levels = [lv for found in build_levels_many(pipeline, requests, workers) for lv in found]
@@ -263,8 +264,8 @@ def test_merged_detection_of_a_cuda_pipeline_runs_on_the_cpu_in_the_workers(leve
 
     cuda_like.detect_keypoints = cpu_only
     with torch_threads(1):  # as build_levels_many runs it (forked workers run single-threaded torch)
-        (want, want_members), = _merged_keypoints(pipeline, detections, requests, 1)
-        (got, got_members), = _merged_keypoints(cuda_like, detections, requests, 2)
+        (want, want_members), = _detected_keypoints(pipeline, detections, requests, 1)
+        (got, got_members), = _detected_keypoints(cuda_like, detections, requests, 2)
     assert len(want) > 20 and torch.equal(want.xy, got.xy) and torch.equal(want.response, got.response)
     assert all(np.array_equal(a, b) for a, b in zip(want_members, got_members, strict=True))
 

@@ -153,30 +153,35 @@ def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], work
         Per request: "scale" and "merged" detection, one ScaleLevel per distinct block scale, in increasing
         scale index; "block", one ScaleLevel per block, in block order. Features are in scaled-image pixels.
     """
-    detections, merged = [], []
+    # A detector that runs apart from the patch stages (Hz+) detects the "scale" levels first too, so that their
+    # patch stages go in pieces when the description is forked: the same features as ``detect``.
+    apart = (device_workers(pipeline, workers) > 1 and pipeline.describe_batch() is not None
+             and pipeline.slime_detection == "merged")
+    detections, keypointed = [], []
     for r, request in enumerate(requests):
         blocks = request.blocks
         for scale_index in sorted({b.scale_index for b in blocks}):
             members_blocks = [i for i, b in enumerate(blocks) if b.scale_index == scale_index]
             scaled = resize_lanczos(request.image, blocks[members_blocks[0]].factor)
-            if request.detection == "scale":
-                detections.append(_Detection(r, members_blocks, scaled, pipeline.prepare(scaled), None))
-            elif request.detection == "block":
+            if request.detection == "block":
                 detections += [_Detection(r, [i], scaled, pipeline.prepare(blocks[i].crop(scaled)), blocks[i])
                                for i in members_blocks]
+            elif request.detection == "merged" or apart:
+                keypointed.append(_Detection(r, members_blocks, scaled, None, None))
             else:
-                merged.append(_Detection(r, members_blocks, scaled, None, None))
-    if merged:
+                detections.append(_Detection(r, members_blocks, scaled, pipeline.prepare(scaled), None))
+    if keypointed:
         device = getattr(pipeline, "device", torch.device("cpu"))
         with torch_threads(1):
-            for d, (keypoints, members) in zip(merged, _merged_keypoints(pipeline, merged, requests, workers)):
+            for d, (keypoints, members) in zip(keypointed, _detected_keypoints(pipeline, keypointed, requests,
+                                                                                workers)):
                 d.context, d.keypoints, d.members = pipeline.prepare(d.scaled), keypoints.to(device), members
-        detections += merged
+        detections += keypointed
     workers = device_workers(pipeline, workers)
     forked = workers > 1
-    # whole detections first, the largest first; then the merged levels' keypoints in pieces, the largest first
+    # whole detections first, the largest first; then the detected keypoints in pieces, the largest first
     whole = sorted((k for k, d in enumerate(detections) if d.keypoints is None), key=lambda k: -detections[k].pixels)
-    size = piece_size(sum(len(d.keypoints) for d in merged), pipeline.describe_batch(), workers)
+    size = piece_size(sum(len(d.keypoints) for d in keypointed), pipeline.describe_batch(), workers)
     pieces = [(k, slice(0, None)) for k in whole] + sorted(
         ((k, piece) for k, d in enumerate(detections) if d.keypoints is not None
          for piece in pieces_of(len(d.keypoints), size)), key=lambda job: job[1].start - job[1].stop)
@@ -227,31 +232,40 @@ def _joined(parts: list[tuple[np.ndarray | None, ...]]) -> tuple[np.ndarray | No
     return tuple(None if column[0] is None else np.concatenate(column) for column in zip(*parts))
 
 
-def _merged_keypoints(pipeline: BasePipeline, levels: list[_Detection], requests: list[LevelRequest],
-                      workers: int) -> list[tuple[Keypoints, list[np.ndarray]]]:
-    """Merged detection: the detector on every block crop of ``levels`` (forked over ``workers``), then per
-    level the core keypoints of its blocks, merged. A CUDA pipeline with workers detects the crops on the CPU,
-    in the workers: one crop is too small for the GPU (on an H100 the 40 crops of a 640x480 pair took 1.4 s
-    one after another).
+def _detected_keypoints(pipeline: BasePipeline, levels: list[_Detection], requests: list[LevelRequest],
+                        workers: int) -> list[tuple[Keypoints, list[np.ndarray] | None]]:
+    """The detector alone on the levels' images, forked over ``workers`` (the whole images first): a "merged"
+    level's block crops one by one, then its blocks' core keypoints merged; another level's whole scaled
+    image. A CUDA pipeline with workers detects on the CPU, in the workers: one crop is too small for the GPU
+    (on an H100 the 40 crops of a 640x480 pair took 1.4 s one after another).
 
     Returns:
-        Per level: the merged keypoints in scaled-image px (the strongest of each group, see
-        ``merge_keypoints``) and per block of the level the indices of its keypoints among them.
+        Per level: its keypoints in scaled-image px and, for a merged level, per block the indices of its
+        keypoints among them (the strongest of each group, see ``merge_keypoints``); None for another level
+        (``_level`` gives the blocks the keypoints of their cores).
     """
-    crops = [(d, i) for d in levels for i in d.blocks]
+    merged = [requests[d.request].detection == "merged" for d in levels]
+    crops = [(d, None) for d, m in zip(levels, merged) if not m] + [(d, i) for d, m in zip(levels, merged) if m
+                                                                     for i in d.blocks]
     device = torch.device("cpu") if uses_cuda(pipeline) and workers > 1 else None
 
     def detect(k: int) -> tuple[np.ndarray, ...]:
         d, i = crops[k]
-        block = requests[d.request].blocks[i]
-        keypoints = pipeline.detect_keypoints(block.crop(d.scaled), device)
-        core = torch.from_numpy(block.in_core_local(keypoints.xy.cpu().numpy())).to(keypoints.xy.device)
-        keypoints = keypoints.subset(core)
-        xy = keypoints.xy.cpu().numpy() + np.array(block.box[:2], np.float32)
+        if i is None:
+            keypoints = pipeline.detect_keypoints(d.scaled, device)
+            xy = keypoints.xy.cpu().numpy()
+        else:
+            block = requests[d.request].blocks[i]
+            keypoints = pipeline.detect_keypoints(block.crop(d.scaled), device)
+            core = torch.from_numpy(block.in_core_local(keypoints.xy.cpu().numpy())).to(keypoints.xy.device)
+            keypoints = keypoints.subset(core)
+            xy = keypoints.xy.cpu().numpy() + np.array(block.box[:2], np.float32)
         return (xy, *(t.cpu().numpy() for t in (keypoints.ellipse, keypoints.response, keypoints.level)))
 
-    found = iter(fork_map(detect, len(crops), workers))
-    return [merge_keypoints([next(found) for _ in d.blocks]) for d in levels]
+    found = dict(zip(((id(d), i) for d, i in crops), fork_map(detect, len(crops), workers)))
+    return [merge_keypoints([found[id(d), i] for i in d.blocks]) if m
+            else (Keypoints(*(torch.from_numpy(a) for a in found[id(d), None])), None)
+            for d, m in zip(levels, merged)]
 
 
 def merge_keypoints(parts: list[tuple[np.ndarray, ...]], radius: float = MERGE_RADIUS
