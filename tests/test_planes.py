@@ -170,8 +170,9 @@ def test_expand_planes_equals_the_pair_by_pair_rule(mode):
     t = _table(xy0, xy1, angle0, angle0 + g.normal(0, 1.0, m), np.ones(m), np.exp(g.normal(0, 1.0, m)))
     side = np.array([1, 1, 1, -1, 1, 1, 1, 1.0])
     config = PlaneConfig(relative_scale=mode)
-    got = expand_planes(t, h, side, config)
     ref = _expand_reference(t, h, side, config)
     assert 1024 < ref.sum() < ref.size - 600 and not ref[3].any()
-    np.testing.assert_array_equal(got.toarray(), ref)
-    assert got.has_canonical_format
+    for threads in (1, 3):  # 3 threads: the 8 planes in 8 parts of one (np.linspace bounds)
+        got = expand_planes(t, h, side, config, threads=threads)
+        np.testing.assert_array_equal(got.toarray(), ref)
+        assert got.has_canonical_format

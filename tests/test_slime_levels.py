@@ -19,8 +19,8 @@ from slime_match.matcher import Matcher
 from slime_match.pipelines import BaseConfig, make_base_pipeline
 from slime_match.slime.block_matching import (
     LevelRequest,
-    _Detection,
     _detected_keypoints,
+    _Detection,
     build_levels,
     build_levels_many,
     describe_fixed_bins,

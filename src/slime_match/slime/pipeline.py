@@ -250,7 +250,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     table, _ = deduplicate(raw_table)
     counts.update(block_matches=len(raw_table), block_matches_unique=len(table))
     with timer("expansion"):
-        expanded = expand_planes(table, h, side, config.planes)
+        expanded = expand_planes(table, h, side, config.planes, threads=workers)
     counts["expanded_memberships"] = int(expanded.nnz)
     with timer("plane_selection"):
         selected = select_planes(table, expanded, tiles0, tiles1, config.tiles, threads=workers)

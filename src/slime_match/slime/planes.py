@@ -16,8 +16,10 @@ orientation and scale are those from image 2 to image 1, ``-rho`` and ``1 / psi`
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -200,7 +202,7 @@ def relative_orientation(
 
 
 def expand_planes(
-    table: MatchTable, h: np.ndarray, side: np.ndarray, config: PlaneConfig | None = None
+    table: MatchTable, h: np.ndarray, side: np.ndarray, config: PlaneConfig | None = None, threads: int = 1
 ) -> sp.csr_matrix:
     """Plane expansion and match pruning: the sets P_l of table matches compatible with each H_l.
 
@@ -218,6 +220,7 @@ def expand_planes(
         h: (L, 3, 3) plane homographies, image 1 -> image 2.
         side: (L,) sign (+1/-1) of the third homogeneous coordinate of ``H_l x`` on the plane's own matches.
         config: thresholds; paper defaults when None.
+        threads: threads sharing the planes (the compiled loop releases the GIL; the same result for any).
 
     Returns:
         (L, M) boolean CSR matrix, row l = P_l.
@@ -229,8 +232,20 @@ def expand_planes(
     if n_planes == 0 or n_matches == 0:
         return sp.csr_matrix((n_planes, n_matches), dtype=bool)
     psi = table.scale1 / table.scale0 if config.relative_scale == "patch" else np.ones(n_matches)
-    pl, mi = plane_kernels.expansion_pairs(h.reshape(-1, 9), np.linalg.inv(h).reshape(-1, 9), side, table.xy0,
-                                           table.xy1, table.rho, psi, config.t_perp, config.t_theta, config.t_sigma)
+    forward, backward = h.reshape(-1, 9), np.linalg.inv(h).reshape(-1, 9)
+
+    def expand(part: slice) -> tuple[np.ndarray, np.ndarray]:
+        pl, mi = plane_kernels.expansion_pairs(forward[part], backward[part], side[part], table.xy0, table.xy1,
+                                               table.rho, psi, config.t_perp, config.t_theta, config.t_sigma)
+        return pl + part.start, mi
+
+    if threads > 1:
+        bounds = np.unique(np.linspace(0, n_planes, min(n_planes, 4 * threads) + 1).astype(int))
+        with ThreadPoolExecutor(threads) as pool:  # a few parts per thread: even loads
+            found = list(pool.map(expand, [slice(a, b) for a, b in itertools.pairwise(bounds)]))
+        pl, mi = (np.concatenate(column) for column in zip(*found))
+    else:
+        pl, mi = expand(slice(0, n_planes))
     log.debug("expand_planes: %d planes x %d matches -> %d memberships", n_planes, n_matches, len(pl))
     indptr = np.concatenate([[0], np.cumsum(np.bincount(pl, minlength=n_planes))])  # pl is ascending
     return sp.csr_matrix((np.ones(len(pl), dtype=bool), mi, indptr), shape=(n_planes, n_matches))
