@@ -6,9 +6,9 @@ keypoint (a block owns the keypoints of its core, i.e. the block minus its 32 px
 under a fixed orientation are computed once per (scale, orientation bin) and only for the keypoints that
 a block pair needs; RANSACs of all block pairs run as one batch; the detections, the descriptions (in pieces
 of keypoints, so that the workers finish together), block pairs and RANSAC batches are spread over forked
-worker processes. Forked processes cannot use CUDA: on CUDA the networks run
-in the main process, while the block crops' detector and the block and tile pairs run on the CPU in the
-workers (``uses_cuda``).  How blocks get their keypoints (``LevelRequest.detection``):
+worker processes. Forked processes cannot use CUDA: on CUDA the networks run in the main process, while the
+block crops' detector and the block and tile pairs run on the CPU in the workers (``uses_cuda``). How blocks
+get their keypoints (``LevelRequest.detection``):
 
 * "scale": one detection per block scale on the whole scaled image, each block owning its core's keypoints;
 * "block": the paper's prototype, each block crop (zero-padded box) detected and described on its own, so
@@ -123,7 +123,8 @@ class LevelRequest:
 @dataclass
 class _Detection:
     """One detection to run: a whole scaled image (``block`` None) or one block crop of it; with
-    ``keypoints`` (merged detection), only the patch stages on the whole scaled image."""
+    ``keypoints`` (merged detection, or a "scale" level detected apart), only the patch stages on the whole
+    scaled image, and ``members`` the merged level's keypoints of each block (None: ``_level`` finds them)."""
 
     request: int
     blocks: list[int]
@@ -324,8 +325,8 @@ def describe_fixed_bins(pipeline: BasePipeline, requests: list[tuple[ScaleLevel,
 
     Args:
         requests: (level, orientation bin -> indices of the level's features needed under that bin's angle),
-            each level at most once. Each (level, bin) is described in one batched call, and only for features
-            not already cached.
+            each level at most once. Each (level, bin) is described in batched calls (one, or pieces spread
+            over the workers), and only for features not already cached.
         workers: forked processes sharing the calls, each (level, bin) in pieces (``piece_size``: the same
             descriptors as in one process); one process on CUDA.
     """
