@@ -221,14 +221,11 @@ def main(argv: list[str] | None = None) -> int:
     except SlimeMatchError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
-    except Exception as error:
+    except BaseException as error:  # Ctrl-C: a KeyboardInterrupt, or an error that one caused (numba's)
         if caused_by_interrupt(error):
             print("interrupted", file=sys.stderr)
             return 130
-        if args.debug:
+        if args.debug or not isinstance(error, Exception):  # SystemExit and the like go on
             raise
         print(f"error: {type(error).__name__}: {error} (rerun with --debug for details)", file=sys.stderr)
         return 1

@@ -156,8 +156,8 @@ def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], work
     """
     # A detector that runs apart from the patch stages (Hz+) detects the "scale" levels first too, so that their
     # patch stages go in pieces when the description is forked: the same features as ``detect``.
-    apart = (device_workers(pipeline, workers) > 1 and pipeline.describe_batch() is not None
-             and pipeline.slime_detection == "merged")
+    describers = device_workers(pipeline, workers)  # the crops' detector uses ``workers``, also on CUDA
+    apart = describers > 1 and pipeline.describe_batch() is not None and pipeline.slime_detection == "merged"
     detections, keypointed = [], []
     for r, request in enumerate(requests):
         blocks = request.blocks
@@ -178,11 +178,10 @@ def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], work
                                                                                 workers)):
                 d.context, d.keypoints, d.members = pipeline.prepare(d.scaled), keypoints.to(device), members
         detections += keypointed
-    workers = device_workers(pipeline, workers)
-    forked = workers > 1
+    forked = describers > 1
     # whole detections first, the largest first; then the detected keypoints in pieces, the largest first
     whole = sorted((k for k, d in enumerate(detections) if d.keypoints is None), key=lambda k: -detections[k].pixels)
-    size = piece_size(sum(len(d.keypoints) for d in keypointed), pipeline.describe_batch(), workers)
+    size = piece_size(sum(len(d.keypoints) for d in keypointed), pipeline.describe_batch(), describers)
     pieces = [(k, slice(0, None)) for k in whole] + sorted(
         ((k, piece) for k, d in enumerate(detections) if d.keypoints is not None
          for piece in pieces_of(len(d.keypoints), size)), key=lambda job: job[1].start - job[1].stop)
@@ -199,7 +198,7 @@ def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], work
         return _features_to_numpy(features) if forked else features
 
     with torch_threads(1):  # as in a worker: the same float rounding for any number of workers
-        found = fork_map(detect, len(pieces), workers)
+        found = fork_map(detect, len(pieces), describers)
     parts: list[list] = [[] for _ in detections]
     for (k, piece), result in sorted(zip(pieces, found), key=lambda done: (done[0][0], done[0][1].start)):
         parts[k].append(result)
