@@ -82,6 +82,19 @@ def test_bad_files_raise_clear_errors(tmp_path, make, message):
         load_image(make(tmp_path))
 
 
+def test_corrupt_file_raises_without_decoder_noise(tmp_path, capfd):
+    """A PNG cut short: our error, and none of OpenCV's C++ log lines on stderr."""
+    good = tmp_path / "good.png"
+    cv2.imwrite(str(good), np.zeros((40, 40, 3), np.uint8))
+    cut = tmp_path / "cut.png"
+    cut.write_bytes(good.read_bytes()[:8] + b"garbage" * 10)
+    level = cv2.utils.logging.getLogLevel()
+    with pytest.raises(ImageError, match="not a readable image"):
+        load_image(cut)
+    assert capfd.readouterr().err == ""
+    assert cv2.utils.logging.getLogLevel() == level
+
+
 def test_tiny_and_malformed_arrays():
     with pytest.raises(ImageError, match="smaller than 32"):
         load_image(np.zeros((20, 100), np.uint8))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -59,12 +60,24 @@ def _read_file(path: Path) -> np.ndarray:
         raise ImageError(f"{path}: is a directory, not an image")
     data = np.fromfile(str(path), dtype=np.uint8)
     # any bit depth and channel count, EXIF orientation applied (IMREAD_UNCHANGED would ignore it)
-    image = cv2.imdecode(data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR) if data.size else None
+    with _opencv_silent():  # a corrupt file gets our ImageError below, not OpenCV's decoder log lines too
+        image = cv2.imdecode(data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR) if data.size else None
     if image is None:
         raise ImageError(f"{path}: not a readable image (corrupt file or unsupported format)")
     if image.ndim == 3:  # OpenCV gives BGR, alpha already dropped
         image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
     return image
+
+
+@contextmanager
+def _opencv_silent():
+    """OpenCV's own log (its C++ warnings and errors on stderr) off for the block, then back as it was."""
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    try:
+        yield
+    finally:
+        cv2.utils.logging.setLogLevel(level)
 
 
 def _tensor_to_hwc(tensor: torch.Tensor) -> np.ndarray:
