@@ -1,7 +1,6 @@
 """``slime pairs``: pairs files, one folder per pair, resuming, failures recorded, workers."""
 
 import json
-import os
 import shutil
 
 import numpy as np
@@ -10,6 +9,7 @@ from conftest import run_cli
 
 from slime_match.batch import match_pairs, read_pairs
 from slime_match.config import make_config
+from slime_match.cpus import available_cpus
 from slime_match.errors import ConfigError, ImageError
 
 FAST = ["--method", "rootsift"]  # the base RootSIFT alone: the run logic, not the matcher, is under test
@@ -114,7 +114,7 @@ def test_pairs_workers_give_the_same_matches(images, tmp_path, capsys):
         assert len(a["scores"]) > 100 and np.array_equal(a["keypoints0"], b["keypoints0"])
         assert np.array_equal(a["keypoints1"], b["keypoints1"])
     summary = json.loads((runs[2] / "left.png__right.png" / "summary.json").read_text())
-    assert summary["config"]["slime"]["workers"] == max(1, (os.cpu_count() or 1) // 2)  # no oversubscription
+    assert summary["config"]["slime"]["workers"] == max(1, available_cpus() // 2)  # no oversubscription
 
 
 def test_pool_workers_may_fork_slime_workers(images, tmp_path):

@@ -128,7 +128,8 @@ def test_bad_input_one_line_error_no_output(pair, tmp_path, capsys, case):
 
 
 def test_bad_options_and_missing_gpu(pair, tmp_path, capsys):
-    for bad in (["--descriptor", "sift2"], ["--scales", "1,x"], ["--scales", "0,2"]):
+    for bad in (["--descriptor", "sift2"], ["--scales", "1,x"], ["--scales", "0,2"], ["--workers", "0"],
+                ["--workers", "two"]):
         with pytest.raises(SystemExit):
             main(["match", *pair, "-o", str(tmp_path), *bad])
     code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--threshold", "-1", "--method", "rootsift")
@@ -152,6 +153,22 @@ def test_max_side_shrinks_and_maps_back(pair, tmp_path, capsys):
     assert summary["config"]["max_side"] == 185
     keypoints = np.load(tmp_path / "matches.npz")["keypoints0"]
     assert len(keypoints) > 20 and keypoints[:, 0].max() > 185 and keypoints.max() < 370
+
+
+def test_workers_option_sets_slime_processes_and_keeps_the_matches(pair, tmp_path, capsys, caplog):
+    """``--workers 1`` (no forks) and ``--workers 2`` give the same matches; -v and the summary name the count."""
+    caplog.set_level("INFO", logger="slime_match")
+    for workers in (1, 2):
+        code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / str(workers), *WEIGHT_FREE, "--scales", "1",
+                               "--workers", workers, "--no-plot", "-v")
+        assert code == 0, err
+        assert f"{workers} worker process" in caplog.text
+        summary = json.loads((tmp_path / str(workers) / "summary.json").read_text())
+        assert summary["config"]["slime"]["workers"] == workers
+    one, two = (np.load(tmp_path / str(w) / "matches.npz") for w in (1, 2))
+    assert len(one["scores"]) > 0
+    for key in ("keypoints0", "keypoints1", "scores"):
+        assert np.array_equal(one[key], two[key])
 
 
 def test_verbose_logs_stages_as_they_finish(pair, tmp_path, capsys, caplog):

@@ -26,6 +26,7 @@ from tqdm import tqdm
 
 from . import __version__
 from .config import MatchConfig
+from .cpus import available_cpus
 from .errors import ConfigError, ImageError
 from .io import jsonable, load_image, save_json
 from .matcher import Matcher
@@ -213,10 +214,10 @@ def _match_one(matcher: Matcher, job: PairJob, out: Path, plot: bool) -> dict[st
 def _match_in_pool(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool, workers: int
                    ) -> Iterator[tuple[int, dict[str, Any]]]:
     """(index, record) of the ``todo`` pairs as they finish in ``workers`` spawned processes, each with a
-    Matcher of ``matcher``'s configuration and an equal share of the CPU cores (torch threads and Slime's own
-    forked workers). On an interruption the workers are stopped at once (a pair's files are
-    written all or nothing)."""
-    share = max(1, (os.cpu_count() or 1) // workers)
+    Matcher of ``matcher``'s configuration and an equal share of the available CPUs (``available_cpus``:
+    torch threads and Slime's own forked workers). On an interruption the workers are stopped at once (a
+    pair's files are written all or nothing)."""
+    share = max(1, available_cpus() // workers)
     config = copy.deepcopy(matcher.config)
     if config.slime.workers is None:
         config.slime.workers = share

@@ -49,6 +49,23 @@ def _add_match_options(parser: argparse.ArgumentParser) -> None:
                              "(fastest, the RootSIFT and Key.Net default; fewer matches in low-texture scenes)")
 
 
+def _add_workers_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--workers", dest="slime_workers", type=positive_int, default=None, metavar="N",
+                        help="processes for Slime's parallel steps (default: one per CPU this process may use, "
+                             "its affinity mask and cgroup quota; 1: no forks); the matches do not depend on it")
+
+
+def positive_int(text: str) -> int:
+    """An integer >= 1 (an argparse type: anything else raises ArgumentTypeError)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected at least 1, got {value}")
+    return value
+
+
 def parse_scales(text: str) -> tuple[int, ...]:
     """Slime block scales from ``"1,2,3"`` (an argparse type: bad text raises ArgumentTypeError)."""
     try:
@@ -63,7 +80,7 @@ def parse_scales(text: str) -> tuple[int, ...]:
 def _options(args: argparse.Namespace) -> dict:
     keys = ("base", "descriptor", "shape", "orientation", "upright", "ransac", "threshold", "seed", "device",
             "weights_dir", "magnification", "scales", "detection", "max_side")
-    return {key: getattr(args, key) for key in keys}
+    return {key: getattr(args, key) for key in keys} | {"workers": getattr(args, "slime_workers", None)}
 
 
 def _config(args: argparse.Namespace):
@@ -175,6 +192,7 @@ def build_parser() -> argparse.ArgumentParser:
     match.add_argument("--save-stages", action="store_true", help="also write Slime's stage sets (stages.npz)")
     match.add_argument("--no-plot", action="store_true", help="skip matches.png")
     _add_match_options(match)
+    _add_workers_option(match)
     match.set_defaults(func=cmd_match)
 
     pairs = sub.add_parser("pairs", help="match many pairs listed in a file (resumable, optional workers)")
@@ -193,6 +211,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo = sub.add_parser("demo", help="match a bundled real stereo pair (Middlebury motorcycle) and score it")
     demo.add_argument("-o", "--output", default="slime_demo", help="output folder (default slime_demo/)")
     _add_match_options(demo)
+    _add_workers_option(demo)
     demo.set_defaults(func=cmd_demo)
 
     viz = sub.add_parser("viz", help="draw Slime stages saved by `slime match --save-stages`")

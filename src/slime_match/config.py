@@ -57,6 +57,9 @@ class MatchConfig:
             raise ConfigError(f"max_side must be an integer of at least {MIN_IMAGE_SIDE} px, got {self.max_side!r}")
         if not self.threshold > 0:
             raise ConfigError(f"threshold must be > 0 px, got {self.threshold}")
+        workers = self.slime.workers
+        if workers is not None and not (isinstance(workers, numbers.Integral) and workers >= 1):
+            raise ConfigError(f"workers must be an integer of at least 1 (None: one per available CPU), got {workers!r}")
         for name in ("detection", "tile_detection"):
             value = getattr(self.slime, name)
             if value is not None or name == "tile_detection":

@@ -11,11 +11,11 @@ Stages and where they live:
 from __future__ import annotations
 
 import logging
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..cpus import available_cpus
 from ..geometry import ransac_kernels
 from ..geometry.homography import project
 from ..geometry.ransac import HomographyRansacConfig
@@ -61,7 +61,7 @@ class SlimeConfig:
         min_plane_matches: a block pair yields a plane only with at least this many RANSAC inliers
             (ours: the paper does not state a minimum; 4 would be any minimal sample).
         workers: processes for the detections, block pairs and tiles, and threads for the epipolar vote
-            (None = one per CPU core). On CUDA the networks stay in one process and the workers run the
+            (None = one per CPU this process may use, ``available_cpus``; the matches do not depend on it). On CUDA the networks stay in one process and the workers run the
             block crops' detector and the block and tile pairs (Blob matching, DTM, RANSAC) on the CPU.
         refine_tiles: run Sec. 3.8 (tile re-matching + global DTM); False stops at F^theta.
         global_dtm: the final DTM on the union of F^theta and tile matches (Sec. 3.8); None: the base
@@ -182,9 +182,10 @@ def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks
 
 
 def _workers(requested: int | None) -> int:
-    """Worker processes for Slime's stages: ``requested``, or one per CPU core. On CUDA they run only CPU
-    work: the networks stay in one process (see ``device_workers`` and ``uses_cuda``)."""
-    return max(1, requested) if requested is not None else max(1, os.cpu_count() or 1)
+    """Worker processes for Slime's stages: ``requested``, or one per CPU this process may use
+    (``available_cpus``). On CUDA they run only CPU work: the networks stay in one process (see
+    ``device_workers`` and ``uses_cuda``)."""
+    return max(1, requested) if requested is not None else available_cpus()
 
 
 def select_planes(table: MatchTable, expanded, tiles0: list[Block], tiles1: list[Block], config: TileConfig,
@@ -225,12 +226,13 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         warnings.append(message)
         logger.warning(message)
 
-    logger.info("Slime: %d x %d blocks (%d block pairs), %d and %d tiles", len(blocks0), len(blocks1),
-                len(blocks0) * len(blocks1), len(tiles0), len(tiles1))
+    workers = _workers(config.workers)
+    logger.info("Slime: %d x %d blocks (%d block pairs), %d and %d tiles, %d worker process%s", len(blocks0),
+                len(blocks1), len(blocks0) * len(blocks1), len(tiles0), len(tiles1), workers,
+                "" if workers == 1 else "es")
     for message in (layout_warning(len(blocks0), len(blocks1)), tile_count_warning(len(tiles0), len(tiles1))):
         if message:
             warn(message)
-    workers = _workers(config.workers)
     if workers > 1:  # loaded once here, the forked workers of every stage inherit the compiled loops
         pipeline.load_kernels()
         ransac_kernels.load_kernels()
