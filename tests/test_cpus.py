@@ -27,7 +27,7 @@ def test_affinity_mask_bounds_the_default_workers():
 
 def _cgroup(root, relative, files):
     folder = root / relative
-    folder.mkdir(parents=True)
+    folder.mkdir(parents=True, exist_ok=True)
     for name, text in files.items():
         (folder / name).write_text(text + "\n")
 
@@ -49,11 +49,18 @@ def test_cgroup_v1_quota(tmp_path):
     assert cgroup_cpu_quota(tmp_path, "1:cpu:/\n") is None
 
 
+def test_a_container_sees_its_cgroup_at_the_mount(tmp_path):
+    """/proc/self/cgroup names the host's path, the container mounts only its own cgroup: its files are read."""
+    _cgroup(tmp_path, "", {"cpu.max": "200000 100000"})
+    assert cgroup_cpu_quota(tmp_path, "0::/system.slice/docker-abc.scope\n") == 2.0
+
+
 def test_missing_or_odd_cgroup_files_mean_no_quota(tmp_path):
     assert cgroup_cpu_quota(tmp_path, "0::/nowhere\n1:cpu:/nowhere\n") is None
     _cgroup(tmp_path, "odd", {"cpu.max": "lots 100000"})
     assert cgroup_cpu_quota(tmp_path, "0::/odd\n") is None
     assert cgroup_cpu_quota(tmp_path, "") is None
+    assert cgroup_cpu_quota(tmp_path, "not a cgroup line\n") is None
 
 
 @pytest.mark.parametrize("workers", [0, -2, 1.5, "2"])

@@ -33,23 +33,34 @@ def available_cpus(cgroup_root: Path = CGROUP_ROOT, membership: str | None = Non
 
 def cgroup_cpu_quota(cgroup_root: Path = CGROUP_ROOT, membership: str | None = None) -> float | None:
     """CPUs' worth of time per period that this process's cgroup may use (cgroup v2 ``cpu.max``, v1
-    ``cpu.cfs_quota_us`` / ``cpu.cfs_period_us``), or None when unlimited or unknown."""
+    ``cpu.cfs_quota_us`` / ``cpu.cfs_period_us``), or None when unlimited or unknown.
+
+    The cgroup's folder is its path from ``membership`` under the mount, else the mount itself (a container
+    that sees only its own cgroup there while ``/proc/self/cgroup`` names the host's path).
+    """
     if membership is None:
         try:
             membership = Path("/proc/self/cgroup").read_text()
         except OSError:
             return None
     for line in membership.splitlines():
-        _, controllers, path = line.split(":", 2)
-        relative = path.lstrip("/")
+        parts = line.split(":", 2)
+        if len(parts) != 3:
+            continue
+        _, controllers, path = parts
         if controllers == "":  # v2: "0::/path"
-            fields = _read(cgroup_root / relative / "cpu.max").split()
+            fields = _read_first(cgroup_root, path, "cpu.max").split()
             if len(fields) == 2 and fields[0] != "max":
                 return _ratio(fields[0], fields[1])
         elif "cpu" in controllers.split(","):  # v1: "4:cpu,cpuacct:/path"
-            folder = cgroup_root / controllers / relative
-            return _ratio(_read(folder / "cpu.cfs_quota_us"), _read(folder / "cpu.cfs_period_us"))
+            mount = cgroup_root / controllers
+            return _ratio(_read_first(mount, path, "cpu.cfs_quota_us"), _read_first(mount, path, "cpu.cfs_period_us"))
     return None
+
+
+def _read_first(mount: Path, path: str, name: str) -> str:
+    """The file ``name`` of the cgroup ``path`` under ``mount``, else of the mount's own folder ("" if neither)."""
+    return _read(mount / path.lstrip("/") / name) or _read(mount / name)
 
 
 def _read(path: Path) -> str:

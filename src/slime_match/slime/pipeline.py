@@ -61,8 +61,9 @@ class SlimeConfig:
         min_plane_matches: a block pair yields a plane only with at least this many RANSAC inliers
             (ours: the paper does not state a minimum; 4 would be any minimal sample).
         workers: processes for the detections, block pairs and tiles, and threads for the epipolar vote
-            (None = one per CPU this process may use, ``available_cpus``; the matches do not depend on it). On CUDA the networks stay in one process and the workers run the
-            block crops' detector and the block and tile pairs (Blob matching, DTM, RANSAC) on the CPU.
+            (None = one per CPU this process may use, ``available_cpus``; the matches do not depend on it).
+            On CUDA the networks stay in one process and the workers run the block crops' detector and the
+            block and tile pairs (Blob matching, DTM, RANSAC) on the CPU.
         refine_tiles: run Sec. 3.8 (tile re-matching + global DTM); False stops at F^theta.
         global_dtm: the final DTM on the union of F^theta and tile matches (Sec. 3.8); None: the base
             pipeline's ``slime_global_dtm`` (the paper's Slimed Key.Net runs none). Exact duplicates are merged
