@@ -102,7 +102,7 @@ def make_config(preset: str = "slime", **options: Any) -> MatchConfig:
     the Slime block scales, ``same_homography="set"`` F-bar's literal two sets per tile (see
     ``TileConfig``). Unknown keys raise ConfigError.
     """
-    if preset not in PRESETS:
+    if not isinstance(preset, str) or preset not in PRESETS:
         raise ConfigError(f"unknown method/preset {preset!r}: choose one of {', '.join(PRESETS)}")
     config = MatchConfig()
     settings = {**PRESETS[preset], **{k: v for k, v in options.items() if v is not None}}

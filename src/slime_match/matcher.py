@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import logging
 import time
 from typing import Any
@@ -42,7 +43,7 @@ class Matcher:
     """
 
     def __init__(self, config: MatchConfig | None = None) -> None:
-        self.config = (config or make_config()).validate()
+        self.config = copy.deepcopy(config or make_config()).validate()  # the caller's config is left as it is
         self.device = resolve_device(self.config.device)
         self.warnings: list[str] = []
         base = self.config.base
@@ -129,18 +130,27 @@ def _working_image(image: np.ndarray, max_side: int | None) -> tuple[np.ndarray,
     return working, scale
 
 
-def match(image0: ImageLike, image1: ImageLike, method: str = "slime", **options: Any) -> MatchResult:
+def match(image0: ImageLike, image1: ImageLike, method: str | MatchConfig = "slime", **options: Any) -> MatchResult:
     """Match two images.
 
     Args:
         image0, image1: paths, (H, W[, C]) numpy arrays or torch tensors (grey, RGB or RGBA; 8/16-bit or float).
         method: a preset of :data:`slime_match.config.PRESETS`: "slime" (default), "slime-upright",
             "slime-rootsift", "slime-fast", "slime-fine", "hz+", "hz+-upright", "rootsift", "rootsift-upright"...
+            or a MatchConfig (from :func:`slime_match.config.make_config`), used as it is.
         **options: flat overrides, e.g. ``descriptor="tfeat"``, ``ransac="fundamental"``, ``threshold=3``,
             ``base="rootsift"``, ``device="cuda"``, ``seed=1``, ``max_side=1600`` (see
             :func:`slime_match.config.make_config`).
 
     Returns:
         MatchResult with (K, 2) keypoints in original-image pixels, (K,) scores and a summary.
+
+    Raises:
+        ConfigError: an unknown preset or option, or options given together with a MatchConfig.
     """
+    if isinstance(method, MatchConfig):
+        if options:
+            raise ConfigError(f"options {', '.join(sorted(options))} given with a MatchConfig: set them in "
+                              "make_config(preset, ...) instead")
+        return Matcher(method)(image0, image1)
     return Matcher(make_config(method, **options))(image0, image1)

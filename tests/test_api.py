@@ -1,0 +1,60 @@
+"""The top-level Python API: ``slime_match.match`` and ``Matcher`` on the kinds of input users pass."""
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+import slime_match as sm
+from slime_match.errors import ConfigError
+
+WEIGHT_FREE = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift"}
+
+
+@pytest.fixture(scope="module")
+def rgb_pair(pair):
+    """(H, W, 3) uint8 RGB images of the real stereo pair."""
+    return [cv2.imread(path)[:, :, ::-1].copy() for path in pair]
+
+
+@pytest.fixture(scope="module")
+def reference(rgb_pair):
+    return sm.match(*rgb_pair, "hz+", **WEIGHT_FREE)
+
+
+def _same(a, b):
+    return (np.array_equal(a.keypoints0, b.keypoints0) and np.array_equal(a.keypoints1, b.keypoints1)
+            and np.array_equal(a.scores, b.scores))
+
+
+def test_match_finds_matches_and_names_its_configuration(reference):
+    assert len(reference) > 100
+    assert reference.summary["method"] == "hz+"
+
+
+@pytest.mark.parametrize("convert", [
+    lambda im: im.astype(np.float32) / 255.0,  # float in [0, 1]
+    lambda im: im.astype(np.uint16) * 257,  # 16-bit
+    lambda im: torch.from_numpy(im).permute(2, 0, 1).float() / 255.0,  # (3, H, W) tensor
+    lambda im: torch.from_numpy(im).permute(2, 0, 1)[None],  # (1, 3, H, W) uint8 tensor
+], ids=["float", "uint16", "tensor-chw", "tensor-1chw"])
+def test_input_kinds_give_the_same_matches(rgb_pair, reference, convert):
+    assert _same(sm.match(*(convert(im) for im in rgb_pair), "hz+", **WEIGHT_FREE), reference)
+
+
+def test_match_takes_a_config_and_leaves_it_unchanged(rgb_pair, reference):
+    config = sm.make_config("hz+", **WEIGHT_FREE)
+    assert _same(sm.match(*rgb_pair, config), reference)
+    auto = sm.make_config("hz+", shape="baumberg", orientation="gradient")  # descriptor "auto"
+    matcher = sm.Matcher(auto)
+    assert auto.base.descriptor == "auto"  # the matcher resolves "auto" on its own copy
+    assert matcher.config.base.descriptor in ("hardnet", "rootsift")
+
+
+def test_match_refuses_options_beside_a_config_and_odd_presets(rgb_pair):
+    with pytest.raises(ConfigError, match="descriptor.*make_config"):
+        sm.match(*rgb_pair, sm.make_config("hz+"), descriptor="tfeat")
+    with pytest.raises(ConfigError, match="unknown method/preset"):
+        sm.match(*rgb_pair, 3)
+    with pytest.raises(ConfigError, match="unknown method/preset 'sift'"):
+        sm.match(*rgb_pair, "sift")
