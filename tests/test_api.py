@@ -6,6 +6,7 @@ import pytest
 import torch
 
 import slime_match as sm
+from slime_match.cli import main
 from slime_match.errors import ConfigError
 
 WEIGHT_FREE = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift"}
@@ -58,3 +59,18 @@ def test_match_refuses_options_beside_a_config_and_odd_presets(rgb_pair):
         sm.match(*rgb_pair, 3)
     with pytest.raises(ConfigError, match="unknown method/preset 'sift'"):
         sm.match(*rgb_pair, "sift")
+
+
+def test_save_and_load_round_trip(rgb_pair, reference, tmp_path, pair):
+    result = sm.match(*rgb_pair, "hz+", ransac="homography", threshold=15, **WEIGHT_FREE)
+    result.save(tmp_path / "pair.npz")
+    loaded = sm.MatchResult.load(tmp_path / "pair.npz")
+    assert _same(loaded, result) and np.array_equal(loaded.inliers, result.inliers)
+    assert loaded.geometry_kind == "homography" and np.array_equal(loaded.model, result.model)
+    assert loaded.summary["counts"]["inliers"] == int(result.inliers.sum())
+    out = tmp_path / "cli"
+    assert main(["match", *pair, "-o", str(out), "--method", "hz+", "--no-plot", "--shape", "baumberg",
+                 "--orientation", "gradient", "--descriptor", "rootsift"]) == 0
+    from_cli = sm.MatchResult.load(out / "matches.npz")  # its summary is the folder's summary.json
+    assert _same(from_cli, reference) and from_cli.inliers is None and from_cli.model is None
+    assert from_cli.summary["method"] == "hz+"

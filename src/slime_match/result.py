@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -74,9 +75,15 @@ class MatchResult:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> MatchResult:
-        """Read a ``matches.npz`` written by :meth:`save` or by ``slime match``."""
+        """Read a ``matches.npz`` written by :meth:`save` or by ``slime match``, with the summary beside it
+        (``<stem>.json`` from :meth:`save`, else the folder's ``summary.json``) when there is one."""
+        path = Path(path)
         with np.load(path) as data:
             kind = "homography" if "H" in data else "fundamental" if "F" in data else None
             model = data["H"] if "H" in data else data.get("F", None)
             inliers = data.get("inliers", None)
-            return cls(data["keypoints0"], data["keypoints1"], data["scores"], inliers, kind, model)
+            arrays = (data["keypoints0"], data["keypoints1"], data["scores"], inliers, kind, model)
+        summary_file = next((f for f in (path.with_suffix(".json"), path.parent / "summary.json") if f.is_file()),
+                            None)
+        summary = json.loads(summary_file.read_text()) if summary_file else {}
+        return cls(*arrays, summary=summary)
