@@ -1,5 +1,8 @@
 """The top-level Python API: ``slime_match.match`` and ``Matcher`` on the kinds of input users pass."""
 
+import subprocess
+import sys
+
 import cv2
 import numpy as np
 import pytest
@@ -74,3 +77,25 @@ def test_save_and_load_round_trip(rgb_pair, reference, tmp_path, pair):
     from_cli = sm.MatchResult.load(out / "matches.npz")  # its summary is the folder's summary.json
     assert _same(from_cli, reference) and from_cli.inliers is None and from_cli.model is None
     assert from_cli.summary["method"] == "hz+"
+
+
+def test_drawing_leaves_the_callers_matplotlib_backend_alone(tmp_path):
+    """Pictures are drawn on their own Figure objects: a notebook's backend and open figures stay as they were."""
+    script = f"""
+import matplotlib
+matplotlib.use("svg")
+import matplotlib.pyplot as plt
+import numpy as np
+import slime_match as sm
+from slime_match.eval import report
+from slime_match.slime import visualize
+from slime_match.viz import plot_matches
+mine = plt.figure()
+image = np.zeros((40, 50, 3), np.float32)
+result = sm.MatchResult(np.array([[1.0, 2.0]]), np.array([[3.0, 4.0]]), np.array([0.5]))
+plot_matches(image, image, result, {str(tmp_path / "m.png")!r})
+print(matplotlib.get_backend(), plt.get_fignums() == [mine.number])
+"""
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    assert run.stdout.split() == ["svg", "True"]
+    assert (tmp_path / "m.png").stat().st_size > 0

@@ -1,14 +1,13 @@
-"""Drawings of matches, blocks/tiles and Slime planes (matplotlib, headless)."""
+"""Drawings of matches, blocks/tiles and Slime planes (matplotlib figures, not pyplot: the caller's backend
+and open figures are left alone)."""
 
 from __future__ import annotations
 
 import os
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
 
 from .io import save_figure
 
@@ -20,6 +19,12 @@ def side_by_side(image0: np.ndarray, image1: np.ndarray) -> tuple[np.ndarray, fl
     canvas[: image0.shape[0], : image0.shape[1]] = image0
     canvas[: image1.shape[0], image0.shape[1]:] = image1
     return canvas, float(image0.shape[1])
+
+
+def pair_figure(image0: np.ndarray, image1: np.ndarray) -> Figure:
+    """A figure 12 inches wide sized for the two images side by side."""
+    height = max(image0.shape[0], image1.shape[0])
+    return Figure(figsize=(12, 12 * height / (image0.shape[1] + image1.shape[1]) + 0.4))
 
 
 def draw_matches(
@@ -57,8 +62,6 @@ def draw_matches(
     colors = np.asarray("lime" if colors is None else colors, dtype=object if colors is None else float)
     per_match = colors.ndim == 2
     segments = np.stack([keypoints0[index], keypoints1[index] + [offset, 0.0]], axis=1)
-    from matplotlib.collections import LineCollection
-
     lines = LineCollection(segments, colors=colors[index] if per_match else str(colors), linewidths=0.5,
                            alpha=0.5)
     ax.add_collection(lines)
@@ -70,8 +73,8 @@ def draw_matches(
 def plot_matches(image0: np.ndarray, image1: np.ndarray, result, path: str | os.PathLike,
                  title: str | None = None) -> None:
     """Save a picture of a MatchResult: inliers green / outliers red when RANSAC ran, else all green."""
-    figure, ax = plt.subplots(figsize=(12, 12 * max(image0.shape[0], image1.shape[0])
-                                       / (image0.shape[1] + image1.shape[1]) + 0.4))
+    figure = pair_figure(image0, image1)
+    ax = figure.subplots()
     colors = None
     if result.inliers is not None and len(result):
         colors = np.where(np.asarray(result.inliers)[:, None], [[0.1, 0.9, 0.1]], [[0.95, 0.1, 0.1]])
@@ -81,4 +84,3 @@ def plot_matches(image0: np.ndarray, image1: np.ndarray, result, path: str | os.
             title += f", {int(np.sum(result.inliers))} inliers ({result.geometry_kind})"
     draw_matches(ax, image0, image1, result.keypoints0, result.keypoints1, colors, title=title)
     save_figure(path, figure)
-    plt.close(figure)

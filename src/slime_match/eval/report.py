@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from slime_match.eval import metrics as M
 from slime_match.eval.code_version import UNKNOWN
@@ -253,23 +254,14 @@ def csv_table(summary: dict[str, Any], agg: dict[str, Any]) -> str:
 # figures
 
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def bar_charts(summary: dict[str, Any], agg: dict[str, Any], folder: Path) -> list[Path]:
     """One PNG per metric: methods at their best threshold, one bar per group (like the paper's bars)."""
-    plt = _pyplot()
     methods = list(summary["methods"])
     groups = [g for g in GROUPS if any(k[0] == g for k in agg["rows"])]
     written = []
     for column in COLUMNS:
-        fig, ax = plt.subplots(figsize=(max(5.0, 0.7 * len(methods) + 2), 3.2))
+        fig = Figure(figsize=(max(5.0, 0.7 * len(methods) + 2), 3.2))
+        ax = fig.subplots()
         width = 0.8 / len(groups)
         for i, g in enumerate(groups):
             vals = [agg["rows"][(g, m, agg["best"][m])][column] for m in methods]
@@ -286,7 +278,6 @@ def bar_charts(summary: dict[str, Any], agg: dict[str, Any], folder: Path) -> li
         ax.grid(axis="y", alpha=0.3)
         path = folder / f"bar_{column}.png"
         save_figure(path, fig)
-        plt.close(fig)
         written.append(path)
     return written
 
@@ -304,8 +295,8 @@ def _overlay(image: np.ndarray, valid: np.ndarray, covered: np.ndarray) -> np.nd
 def coverage_figure(images, valid, x0: np.ndarray, x1: np.ndarray, t: float, title: str):
     """Paper Fig. "coverage": correct keypoints (blue) dilated by ``t`` px (green) over the valid area
     (red where uncovered), both images."""
-    plt = _pyplot()
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    fig = Figure(figsize=(10, 4))
+    axes = fig.subplots(1, 2)
     for ax, image, v, pts in zip(axes, images, valid, (x0, x1)):
         ax.imshow(_overlay(image, v, M.dilated_mask(pts, v.shape, t)))
         ax.plot(pts[:, 0], pts[:, 1], ".", color="blue", markersize=2)
@@ -343,8 +334,8 @@ def error_maps(gt, model: np.ndarray | None, valid, step: int = 4) -> tuple[np.n
 
 def error_figure(images, maps, t: float, title: str, step: int = 4):
     """Paper Fig. "accuracy": error maps (0..t px colour scale) over the images."""
-    plt = _pyplot()
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    fig = Figure(figsize=(10, 4))
+    axes = fig.subplots(1, 2)
     for ax, image, err in zip(axes, images, maps):
         ax.imshow(image.mean(axis=2), cmap="gray", alpha=0.6)
         h, w = image.shape[:2]
@@ -367,7 +358,6 @@ def error_figure(images, maps, t: float, title: str, step: int = 4):
 def write_pair_maps(folder: Path, images, gt, extras: dict[str, Any], t: float) -> list[Path]:
     """Coverage map of the raw matches (first threshold) and error map of the model at each threshold
     other than "none" (only the first RANSAC one, to keep the folder small), per method."""
-    plt = _pyplot()
     written = []
     keys = list(extras["kept"])
     ths = list(dict.fromkeys(th for _, th in keys))
@@ -380,7 +370,6 @@ def write_pair_maps(folder: Path, images, gt, extras: dict[str, Any], t: float) 
             )
             path = folder / f"coverage_{label}_thr-{th}.png"
             save_figure(path, fig)
-            plt.close(fig)
             written.append(path)
         if th == err_th:
             fig = error_figure(
@@ -391,7 +380,6 @@ def write_pair_maps(folder: Path, images, gt, extras: dict[str, Any], t: float) 
             )
             path = folder / f"error_{label}_thr-{th}.png"
             save_figure(path, fig)
-            plt.close(fig)
             written.append(path)
     return written
 

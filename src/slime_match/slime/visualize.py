@@ -6,15 +6,12 @@ import os
 from pathlib import Path
 
 import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Rectangle
 
 from ..errors import SlimeMatchError
 from ..io import load_image, save_figure
-from ..viz import draw_matches, side_by_side
+from ..viz import draw_matches, pair_figure, side_by_side
 
 STAGES = ("blocks", "tiles", "planes", "superset", "fbar", "ftheta", "tile_matches", "final")
 
@@ -22,7 +19,7 @@ STAGES = ("blocks", "tiles", "planes", "superset", "fbar", "ftheta", "tile_match
 def _set_colors(labels: np.ndarray, seed: int = 0) -> np.ndarray:
     """(K, 3) one random bright colour per distinct label."""
     count = int(labels.max(initial=0)) + 1
-    palette = plt.cm.hsv(np.linspace(0.0, 1.0, count, endpoint=False))[:, :3]
+    palette = matplotlib.colormaps["hsv"](np.linspace(0.0, 1.0, count, endpoint=False))[:, :3]
     return palette[np.random.default_rng(seed).permutation(count)][labels]
 
 
@@ -65,8 +62,8 @@ def render_stages(stages_path: str | os.PathLike, image0, image1, out_dir: str |
     out.mkdir(parents=True, exist_ok=True)
     written = []
     for name in names:
-        figure, ax = plt.subplots(figsize=(12, 12 * max(img0.shape[0], img1.shape[0])
-                                           / (img0.shape[1] + img1.shape[1]) + 0.4))
+        figure = pair_figure(img0, img1)
+        ax = figure.subplots()
         if name in ("blocks", "tiles"):
             canvas, offset = side_by_side(img0, img1)
             ax.imshow(canvas)
@@ -91,6 +88,5 @@ def render_stages(stages_path: str | os.PathLike, image0, image1, out_dir: str |
                          title=f"{name}: {len(data[f'{key}_xy0'])} matches")
         target = out / f"{name}.png"
         save_figure(target, figure)
-        plt.close(figure)
         written.append(target)
     return written
