@@ -71,6 +71,8 @@ def test_save_and_load_round_trip(rgb_pair, reference, tmp_path, pair):
     assert _same(loaded, result) and np.array_equal(loaded.inliers, result.inliers)
     assert loaded.geometry_kind == "homography" and np.array_equal(loaded.model, result.model)
     assert loaded.summary["counts"]["inliers"] == int(result.inliers.sum())
+    assert repr(loaded) == (f"MatchResult({len(result)} matches, method='hz+', {int(result.inliers.sum())} inliers "
+                            f"(homography), {result.summary['seconds']['total']:.2f} s)")
     out = tmp_path / "cli"
     assert main(["match", *pair, "-o", str(out), "--method", "hz+", "--no-plot", "--shape", "baumberg",
                  "--orientation", "gradient", "--descriptor", "rootsift"]) == 0

@@ -48,6 +48,20 @@ class MatchResult:
     def __len__(self) -> int:
         return int(self.keypoints0.shape[0])
 
+    def __repr__(self) -> str:
+        """One line (the arrays and the summary are attributes): counts, method, model, seconds."""
+        parts = [f"{len(self)} matches"]
+        if "method" in self.summary:
+            parts.append(f"method={self.summary['method']!r}")
+        if self.inliers is not None:
+            parts.append(f"{int(np.sum(self.inliers))} inliers ({self.geometry_kind})")
+        seconds = self.summary.get("seconds", {}).get("total")
+        if seconds is not None:
+            parts.append(f"{seconds:.2f} s")
+        if self.summary.get("warnings"):
+            parts.append(f"{len(self.summary['warnings'])} warning(s)")
+        return f"MatchResult({', '.join(parts)})"
+
     def geometry(
         self, kind: str = "fundamental", backend: str = "slime", threshold: float = 3.0, seed: int = 0
     ) -> GeometryResult:
