@@ -1,5 +1,7 @@
 """Weights: kornia's cache layout, HardNet's real checkpoint format, clear errors without network."""
 
+import socket
+
 import kornia
 import kornia.core.download as kdownload
 import pytest
@@ -75,3 +77,21 @@ def test_shared_weights_load(no_network):
         if not is_cached(name):
             pytest.skip("needs ../shared/weights")
         assert not load_model(name).training
+
+
+def test_auto_descriptor_offline_falls_back_without_waiting_for_retries(tmp_path, monkeypatch):
+    """No download host resolves: "auto" takes its fallback at once; kornia's downloader is not called."""
+
+    def no_dns(host, *args, **kwargs):
+        raise socket.gaierror(socket.EAI_NONAME, "Name or service not known")
+
+    def downloader(*args, **kwargs):
+        raise AssertionError("the downloader must not run when no host resolves")
+
+    monkeypatch.setattr(socket, "getaddrinfo", no_dns)
+    monkeypatch.setattr(kdownload, "load_state_dict_from_url", downloader)
+    name, warning = resolve_descriptor("auto", tmp_path)
+    assert name == "rootsift"
+    assert "no download host resolves: huggingface.co" in warning and "--descriptor tfeat or rootsift" in warning
+    with pytest.raises(WeightsNotFoundError, match="must not run"):  # an explicit HardNet still tries kornia's
+        load_model("hardnet", tmp_path)

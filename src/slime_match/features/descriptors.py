@@ -39,7 +39,8 @@ class DescriptorConfig:
 
 def resolve_descriptor(name: str, weights_dir: str | Path | None = None,
                        fallback: str = "rootsift") -> tuple[str, str | None]:
-    """Concrete descriptor for a name; "auto" is HardNet when its weights are cached or downloadable.
+    """Concrete descriptor for a name; "auto" is HardNet when its weights are cached or downloadable (when no
+    download host resolves, "auto" takes the fallback at once instead of retrying).
 
     Args:
         name: "auto" or one of :data:`DESCRIPTOR_METHODS`.
@@ -55,8 +56,8 @@ def resolve_descriptor(name: str, weights_dir: str | Path | None = None,
         return name, None
     if is_cached("hardnet", weights_dir):
         return "hardnet", None
-    try:
-        load_state_dict("hardnet", weights_dir)  # downloads into the cache
+    try:  # downloads into the cache; offline, "auto" does not wait out the downloader's retries
+        load_state_dict("hardnet", weights_dir, retry_offline=False)
     except WeightsNotFoundError as exc:
         return fallback, f"descriptor 'auto': HardNet unavailable, using {fallback} instead. {exc}"
     return "hardnet", None

@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import importlib
 import logging
+import socket
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import urlparse
 
 import torch
 from torch import nn
@@ -97,12 +99,33 @@ def is_cached(name: str, weights_dir: str | Path | None = None) -> bool:
     return weights_path(name, weights_dir).is_file()
 
 
-def load_state_dict(name: str, weights_dir: str | Path | None = None) -> dict:
+def _download_urls(spec: _Spec) -> list[str]:
+    """kornia's URLs for a model, in the order its downloader tries them."""
+    urls = getattr(importlib.import_module(spec.module), spec.urls_attr)
+    urls = urls[spec.url_key] if spec.url_key else urls
+    return [urls] if isinstance(urls, str) else list(urls)
+
+
+def _unresolved_hosts(urls: list[str]) -> list[str] | None:
+    """The URLs' host names when none of them resolves (no network or no DNS), else None."""
+    hosts = list(dict.fromkeys(urlparse(url).hostname or "" for url in urls))
+    for host in hosts:
+        try:
+            socket.getaddrinfo(host, 443)
+            return None
+        except (OSError, UnicodeError):
+            continue
+    return hosts
+
+
+def load_state_dict(name: str, weights_dir: str | Path | None = None, retry_offline: bool = True) -> dict:
     """Checkpoint of model ``name`` through kornia's downloader (cache hit, else download).
 
     Args:
         name: "hardnet", "tfeat", "affnet", "orinet" or "keynet".
         weights_dir: see :func:`checkpoint_dir`.
+        retry_offline: when no download host resolves, still let kornia try (it retries such failures for
+            up to about 10 s, in case the network is back); False fails at once.
 
     Returns:
         The loaded checkpoint (CPU tensors).
@@ -113,10 +136,11 @@ def load_state_dict(name: str, weights_dir: str | Path | None = None) -> dict:
     spec = _spec(name)
     folder = checkpoint_dir(weights_dir)
     download = importlib.import_module("kornia.core.download")
-    urls = getattr(importlib.import_module(spec.module), spec.urls_attr)
-    if spec.url_key:
-        urls = urls[spec.url_key]
+    urls = _download_urls(spec)
     if not (folder / spec.file).is_file():
+        hosts = None if retry_offline else _unresolved_hosts(urls)
+        if hosts is not None:
+            raise _not_found(name, spec, folder, f"no download host resolves: {', '.join(hosts)}; offline?")
         logger.info("%s weights not in %s: trying to download them", name, folder)
     try:
         with warnings.catch_warnings():
@@ -125,11 +149,14 @@ def load_state_dict(name: str, weights_dir: str | Path | None = None) -> dict:
                 urls, model_dir=str(folder), file_name=spec.file, map_location=torch.device("cpu")
             )
     except Exception as exc:
-        raise WeightsNotFoundError(
-            f"{name} weights '{spec.file}' are not in {folder} and could not be downloaded "
-            f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}). Put the file there "
-            f"(or set TORCH_HOME / weights_dir), or use a weight-free alternative: {spec.alternatives}"
-        ) from exc
+        why = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+        raise _not_found(name, spec, folder, why) from exc
+
+
+def _not_found(name: str, spec: _Spec, folder: Path, why: str) -> WeightsNotFoundError:
+    return WeightsNotFoundError(
+        f"{name} weights '{spec.file}' are not in {folder} and could not be downloaded ({why}). Put the file "
+        f"there (or set TORCH_HOME / weights_dir), or use a weight-free alternative: {spec.alternatives}")
 
 
 def load_model(name: str, weights_dir: str | Path | None = None, device: str | torch.device = "cpu") -> nn.Module:
