@@ -93,5 +93,5 @@ def test_auto_descriptor_offline_falls_back_without_waiting_for_retries(tmp_path
     name, warning = resolve_descriptor("auto", tmp_path)
     assert name == "rootsift"
     assert "no download host resolves: huggingface.co" in warning and "--descriptor tfeat or rootsift" in warning
-    with pytest.raises(WeightsNotFoundError, match="must not run"):  # an explicit HardNet still tries kornia's
+    with pytest.raises(WeightsNotFoundError, match="must not run"):  # explicit HardNet: kornia's downloader runs
         load_model("hardnet", tmp_path)
