@@ -218,3 +218,9 @@ def test_ctrl_c_inside_compiled_code_is_an_interruption(pair, tmp_path, capsys, 
     code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "out", *WEIGHT_FREE)
     assert code == 130 and err.strip() == "interrupted"
     assert not (tmp_path / "out").exists()
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--version"])
+    assert exit_info.value.code == 0 and capsys.readouterr().out.strip() == f"slime-match {slime_match.__version__}"

@@ -8,6 +8,7 @@ import logging
 import sys
 from pathlib import Path
 
+from . import __version__
 from .errors import SlimeMatchError, caused_by_interrupt
 
 logger = logging.getLogger("slime_match")
@@ -183,6 +184,7 @@ def cmd_viz(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="slime", description="Image matching by bare homography (Slime)")
     parser.add_argument("--debug", action="store_true", help="show tracebacks and debug logs")
+    parser.add_argument("--version", action="version", version=f"slime-match {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     match = sub.add_parser("match", help="match two images")
