@@ -1,6 +1,8 @@
 """Image loading of every bit depth / channel layout, and atomic result files."""
 
 import json
+import os
+import stat
 
 import cv2
 import numpy as np
@@ -112,3 +114,16 @@ def test_atomic_writers_leave_no_partial_file(tmp_path):
     with pytest.raises(TypeError):
         save_json(tmp_path / "b.json", {"bad": object()})
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "a.npz"]
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o077])
+def test_atomic_writers_follow_the_umask(tmp_path, umask):
+    """Result files get the permissions of a plain open() (0644 under umask 022), not mkstemp's 0600."""
+    previous = os.umask(umask)
+    try:
+        save_npz(tmp_path / "a.npz", x=np.arange(3))
+        save_json(tmp_path / "a.json", {"v": 1})
+    finally:
+        os.umask(previous)
+    for name in ("a.npz", "a.json"):
+        assert stat.S_IMODE((tmp_path / name).stat().st_mode) == 0o666 & ~umask
