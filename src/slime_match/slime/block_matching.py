@@ -245,12 +245,13 @@ def _detected_keypoints(pipeline: BasePipeline, levels: list[_Detection], reques
         (``_level`` gives the blocks the keypoints of their cores).
     """
     merged = [requests[d.request].detection == "merged" for d in levels]
-    crops = [(d, None) for d, m in zip(levels, merged) if not m] + [(d, i) for d, m in zip(levels, merged) if m
-                                                                     for i in d.blocks]
+    crops = [(n, None) for n, m in enumerate(merged) if not m] + [(n, i) for n, m in enumerate(merged) if m
+                                                                   for i in levels[n].blocks]
     device = torch.device("cpu") if uses_cuda(pipeline) and workers > 1 else None
 
     def detect(k: int) -> tuple[np.ndarray, ...]:
-        d, i = crops[k]
+        n, i = crops[k]
+        d = levels[n]
         if i is None:
             keypoints = pipeline.detect_keypoints(d.scaled, device)
             xy = keypoints.xy.cpu().numpy()
@@ -262,10 +263,10 @@ def _detected_keypoints(pipeline: BasePipeline, levels: list[_Detection], reques
             xy = keypoints.xy.cpu().numpy() + np.array(block.box[:2], np.float32)
         return (xy, *(t.cpu().numpy() for t in (keypoints.ellipse, keypoints.response, keypoints.level)))
 
-    found = dict(zip(((id(d), i) for d, i in crops), fork_map(detect, len(crops), workers)))
-    return [merge_keypoints([found[id(d), i] for i in d.blocks]) if m
-            else (Keypoints(*(torch.from_numpy(a) for a in found[id(d), None])), None)
-            for d, m in zip(levels, merged)]
+    found = dict(zip(crops, fork_map(detect, len(crops), workers)))  # (level, block or None) -> arrays
+    return [merge_keypoints([found[n, i] for i in d.blocks]) if m
+            else (Keypoints(*(torch.from_numpy(a) for a in found[n, None])), None)
+            for n, (d, m) in enumerate(zip(levels, merged))]
 
 
 def merge_keypoints(parts: list[tuple[np.ndarray, ...]], radius: float = MERGE_RADIUS
