@@ -64,6 +64,27 @@ def test_match_refuses_options_beside_a_config_and_odd_presets(rgb_pair):
         sm.match(*rgb_pair, "sift")
 
 
+@pytest.mark.parametrize(("preset", "options", "message"), [
+    ("hz+", {"scales": (1, 2)}, "'scales' is a Slime option"),
+    ("rootsift", {"workers": 2}, "'workers' is a Slime option"),
+    ("hz+", {"base": "rootsift"}, "base 'rootsift' is the pipeline inside Slime"),
+    ("rootsift", {"descriptor": "tfeat"}, "rootsift base pipeline does not use 'descriptor'"),
+    ("slime-rootsift", {"shape": "affnet"}, "rootsift base pipeline does not use 'shape'"),
+    ("slime-keynet", {"fginn_ratio": 0.9}, "keynet base pipeline does not use 'fginn_ratio'"),
+    ("slime", {"threshold": 2.0}, "ransac is 'none'"),
+])
+def test_make_config_refuses_options_the_method_would_ignore(preset, options, message):
+    with pytest.raises(ConfigError, match=message):
+        sm.make_config(preset, **options)
+
+
+def test_make_config_takes_the_options_each_method_reads():
+    assert sm.make_config("rootsift", upright=True, fginn_ratio=0.9).base.upright
+    assert sm.make_config("hz+", base="hz+", **WEIGHT_FREE).base.shape == "baumberg"
+    assert sm.make_config("slime-rootsift", dtm=sm.make_config().base.dtm, workers=1).slime.workers == 1
+    assert sm.make_config("hz+", ransac="homography", threshold=2.0).threshold == 2.0
+
+
 def test_save_and_load_round_trip(rgb_pair, reference, tmp_path, pair):
     result = sm.match(*rgb_pair, "hz+", ransac="homography", threshold=15, **WEIGHT_FREE)
     result.save(tmp_path / "pair.npz")

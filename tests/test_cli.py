@@ -136,6 +136,12 @@ def test_bad_options_and_missing_gpu(pair, tmp_path, capsys):
     assert code == 2 and "threshold" in err
     code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--max-side", "8", "--method", "rootsift")
     assert code == 2 and "max_side" in err and not (tmp_path / "matches.npz").exists()
+    for ignored, word in ((["--method", "hz+", "--save-stages"], "--save-stages"),
+                          (["--method", "rootsift", "--shape", "baumberg"], "'shape'"),
+                          (["--method", "hz+", "--scales", "1,2"], "'scales'"),
+                          (["--threshold", "2"], "threshold")):  # options the run would not use
+        code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, *ignored)
+        assert code == 2 and word in err and not (tmp_path / "matches.npz").exists()
     import torch
 
     if not torch.cuda.is_available():

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from . import __version__
-from .errors import SlimeMatchError, caused_by_interrupt
+from .errors import ConfigError, SlimeMatchError, caused_by_interrupt
 
 logger = logging.getLogger("slime_match")
 
@@ -30,7 +30,8 @@ def _add_match_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--upright", action="store_true", default=None,
                         help="no orientation estimation (the paper's upright variants)")
     parser.add_argument("--ransac", default="none", choices=RANSAC_CHOICES, help="post-processing RANSAC")
-    parser.add_argument("--threshold", type=float, default=3.0, help="RANSAC inlier threshold in px")
+    parser.add_argument("--threshold", type=float, default=None,
+                        help="inlier threshold in px of the --ransac post-processing (default 3)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (RANSAC sampling)")
     parser.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"])
     parser.add_argument("--weights-dir", default=None, help="folder with model weights (else TORCH_HOME cache)")
@@ -93,6 +94,9 @@ def _config(args: argparse.Namespace):
         preset, options["base"] = "slime-rootsift", None
     config = make_config(preset, **options)
     if getattr(args, "save_stages", False):
+        if config.method != "slime":
+            raise ConfigError(f"--save-stages writes Slime's stages, but --method {config.method} runs the "
+                              "base pipeline alone")
         config.slime.keep_stages = True
     return config
 

@@ -100,7 +100,9 @@ def make_config(preset: str = "slime", **options: Any) -> MatchConfig:
     Flat keys are looked up on MatchConfig, then BaseConfig (``descriptor``, ``shape``, ``upright``...),
     then SlimeConfig; ``base="rootsift"`` (or "keynet") selects the base pipeline and ``scales=(1, 2)`` sets
     the Slime block scales, ``same_homography="set"`` F-bar's literal two sets per tile (see
-    ``TileConfig``). Unknown keys raise ConfigError.
+    ``TileConfig``). Unknown keys raise ConfigError, and so do keys the method would not read: Slime's options
+    for a base pipeline run alone, a base pipeline's options for another base (``shape`` for RootSIFT), a
+    ``threshold`` without a post-processing RANSAC.
     """
     if not isinstance(preset, str) or preset not in PRESETS:
         raise ConfigError(f"unknown method/preset {preset!r}: choose one of {', '.join(PRESETS)}")
@@ -125,7 +127,32 @@ def make_config(preset: str = "slime", **options: Any) -> MatchConfig:
             raise ConfigError(f"unknown option {key!r}")
     if config.method in BASE_NAMES:
         config.base.name = config.method
-    return config.validate()
+    config.validate()
+    _refuse_unread(config, {key: value for key, value in options.items() if value is not None})
+    return config
+
+
+def _refuse_unread(config: MatchConfig, given: dict[str, Any]) -> None:
+    """Raise ConfigError for a given option that the configured method would not read (it would be ignored
+    silently, and the summary would record a setting that did nothing)."""
+    slime = config.method == "slime"
+    read = PIPELINES[config.base.name].options | ({"name", "dtm"} if slime else {"name"})  # Slime's global DTM
+    for key, value in given.items():
+        if key == "base" and isinstance(value, str):
+            if not slime and value != config.method:
+                raise ConfigError(f"base {value!r} is the pipeline inside Slime, but method {config.method!r} runs "
+                                  f"the {config.method} pipeline alone (use method 'slime' with base {value!r})")
+        elif key == "threshold" and config.ransac == "none":
+            raise ConfigError("threshold is the inlier threshold of the post-processing RANSAC, and ransac is "
+                              "'none': choose a RANSAC (ransac=..., --ransac) or drop the threshold")
+        elif key in ("scales", "same_homography", "slime") or (
+                _has_field(config.slime, key) and not _has_field(config, key)):
+            if not slime:
+                raise ConfigError(f"{key!r} is a Slime option, but method {config.method!r} runs the "
+                                  f"{config.method} pipeline alone (use method 'slime' with base {config.method!r})")
+        elif _has_field(config.base, key) and key not in read:
+            raise ConfigError(f"the {config.base.name} base pipeline does not use {key!r} (it reads "
+                              f"{', '.join(sorted(read - {'name'}))})")
 
 
 def _has_field(obj: Any, name: str) -> bool:

@@ -87,11 +87,13 @@ class BasePipeline:
             the base Key.Net alone").
         slime_detection: Slime's default block detection on this base (``SlimeConfig.detection``): "merged"
             where the detector runs apart from the patch stages (Hz+), else "scale".
+        options: the :class:`BaseConfig` fields this pipeline reads (``make_config`` refuses the others).
     """
 
     name: str = "base"
     slime_global_dtm: bool = True
     slime_detection: str = "scale"
+    options: frozenset[str] = frozenset()
 
     def prepare(self, image: np.ndarray) -> Any:
         raise NotImplementedError
@@ -164,6 +166,8 @@ class HzPlusPipeline(BasePipeline):
 
     name = "hz+"
     slime_detection = "merged"
+    options = frozenset({"descriptor", "shape", "orientation", "upright", "max_keypoints", "magnification",
+                         "weights_dir", "use_dtm", "blob", "dtm"})
 
     def __init__(self, config: BaseConfig, device: torch.device) -> None:
         self.config = config
@@ -250,6 +254,7 @@ class RootSiftPipeline(BasePipeline):
     """OpenCV DoG keypoints + RootSIFT descriptors + FGINN matching (upright: all angles set to 0)."""
 
     name = "rootsift"
+    options = frozenset({"upright", "max_keypoints", "fginn_ratio", "fginn_radius"})
 
     def __init__(self, config: BaseConfig, device: torch.device) -> None:
         self.config = config
@@ -353,6 +358,8 @@ class KeyNetPipeline(BasePipeline):
 
     name = "keynet"
     slime_global_dtm = False
+    options = frozenset({"descriptor", "shape", "orientation", "upright", "max_keypoints", "magnification",
+                         "weights_dir"})
 
     def __init__(self, config: BaseConfig, device: torch.device) -> None:
         import kornia.feature as KF
