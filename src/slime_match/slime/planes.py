@@ -112,13 +112,6 @@ class MatchTable:
         """Rows selected by a boolean mask or an index array."""
         return MatchTable(*(getattr(self, f.name)[index] for f in fields(self)))
 
-    @classmethod
-    def concat(cls, tables: list[MatchTable]) -> MatchTable:
-        """Stack tables row-wise (an empty list gives an empty table)."""
-        if not tables:
-            return cls(*(np.zeros((0, 2)) if f.name in ("xy0", "xy1") else np.zeros(0) for f in fields(cls)))
-        return cls(*(np.concatenate([getattr(t, f.name) for t in tables]) for f in fields(cls)))
-
     @property
     def rho(self) -> np.ndarray:
         """(M,) relative orientations theta' - theta wrapped to (-pi, pi]."""
