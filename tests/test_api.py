@@ -85,6 +85,12 @@ def test_make_config_takes_the_options_each_method_reads():
     assert sm.make_config("hz+", ransac="homography", threshold=2.0).threshold == 2.0
 
 
+def test_geometry_result_repr_is_one_line(reference):
+    geometry = reference.geometry(kind="homography", threshold=3.0)
+    assert repr(geometry) == (f"GeometryResult('homography', {int(geometry.inliers.sum())} of {len(reference)} "
+                              f"inliers, threshold=3.0 px, backend={geometry.info['backend']!r})")
+
+
 def test_save_and_load_round_trip(rgb_pair, reference, tmp_path, pair):
     result = sm.match(*rgb_pair, "hz+", ransac="homography", threshold=15, **WEIGHT_FREE)
     result.save(tmp_path / "pair.npz")

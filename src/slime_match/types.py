@@ -142,3 +142,13 @@ class GeometryResult:
     model: np.ndarray | None
     inliers: np.ndarray
     info: dict = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        """One line (the arrays are attributes): kind, inlier count, threshold and backend."""
+        text = f"GeometryResult({self.kind!r}, {int(np.sum(self.inliers))} of {len(self.inliers)} inliers"
+        if self.model is None:
+            text += ", no model"
+        for key, unit in (("threshold", " px"), ("backend", "")):
+            if key in self.info:
+                text += f", {key}={self.info[key]!r}{unit}"
+        return text + ")"
