@@ -1,0 +1,20 @@
+"""The notice while numba compiles the package's loops (a first run), and its silence when they come from the
+on-disk cache."""
+
+import os
+import subprocess
+import sys
+
+from slime_match.compile_notice import NOTICE
+
+CALL_A_LOOP = ("import numpy as np; from slime_match.matching.dtm_kernels import unique_inverse; "
+               "print(unique_inverse(np.array([3, 1, 3], np.int64))[1])")
+
+
+def test_notice_on_compiling_only(tmp_path):
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}  # an empty cache: the loop must be compiled
+    runs = [subprocess.run([sys.executable, "-c", CALL_A_LOOP], env=env, capture_output=True, text=True, check=True)
+            for _ in range(2)]
+    assert all(run.stdout.strip() == "[1 0 1]" for run in runs)
+    assert runs[0].stderr.count(NOTICE) == 1  # compiled: the notice, once
+    assert NOTICE not in runs[1].stderr  # loaded from the cache the first run wrote
