@@ -85,6 +85,14 @@ def test_make_config_takes_the_options_each_method_reads():
     assert sm.make_config("hz+", ransac="homography", threshold=2.0).threshold == 2.0
 
 
+def test_matcher_repr_names_its_configuration():
+    assert repr(sm.Matcher(sm.make_config("slime", device="cpu", **WEIGHT_FREE))) == (
+        "Matcher(method='slime', base='hz+', scales=(1, 2, 3), shape='baumberg', orientation='gradient', "
+        "descriptor='rootsift', device='cpu')")
+    rootsift = sm.Matcher(sm.make_config("rootsift-upright", device="cpu"))
+    assert repr(rootsift) == "Matcher(method='rootsift', upright=True, device='cpu')"
+
+
 def test_geometry_result_repr_is_one_line(reference):
     geometry = reference.geometry(kind="homography", threshold=3.0)
     assert repr(geometry) == (f"GeometryResult('homography', {int(geometry.inliers.sum())} of {len(reference)} "

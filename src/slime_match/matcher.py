@@ -55,6 +55,19 @@ class Matcher:
                 self.warnings.append(warning)
         self.pipeline = make_base_pipeline(base, self.device)
 
+    def __repr__(self) -> str:
+        """One line: the method and the choices that most change its results and speed."""
+        config, base = self.config, self.config.base
+        text = f"Matcher(method={config.method!r}"
+        if config.method == "slime":
+            text += f", base={base.name!r}, scales={config.slime.blocks.scales}"
+        for key in ("shape", "orientation", "descriptor"):
+            if key in self.pipeline.options and not (key == "orientation" and base.upright):
+                text += f", {key}={getattr(base, key)!r}"
+        if base.upright:
+            text += ", upright=True"  # no orientation estimation, whatever ``orientation`` says
+        return text + f", device={str(self.device)!r})"
+
     def __call__(self, image0: ImageLike, image1: ImageLike) -> MatchResult:
         """Match two images (paths, numpy arrays or torch tensors); see :func:`slime_match.match`."""
         try:
