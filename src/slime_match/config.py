@@ -136,7 +136,7 @@ def _refuse_unread(config: MatchConfig, given: dict[str, Any]) -> None:
     """Raise ConfigError for a given option that the configured method would not read (it would be ignored
     silently, and the summary would record a setting that did nothing)."""
     slime = config.method == "slime"
-    read = PIPELINES[config.base.name].options | ({"name", "dtm"} if slime else {"name"})  # Slime's global DTM
+    read = PIPELINES[config.base.name].options | ({"dtm"} if slime else set())  # Slime's global DTM reads dtm
     for key, value in given.items():
         if key == "base" and isinstance(value, str):
             if not slime and value != config.method:
@@ -150,9 +150,9 @@ def _refuse_unread(config: MatchConfig, given: dict[str, Any]) -> None:
             if not slime:
                 raise ConfigError(f"{key!r} is a Slime option, but method {config.method!r} runs the "
                                   f"{config.method} pipeline alone (use method 'slime' with base {config.method!r})")
-        elif _has_field(config.base, key) and key not in read:
+        elif _has_field(config.base, key) and key not in read | {"name"}:
             raise ConfigError(f"the {config.base.name} base pipeline does not use {key!r} (it reads "
-                              f"{', '.join(sorted(read - {'name'}))})")
+                              f"{', '.join(sorted(read))})")
 
 
 def _has_field(obj: Any, name: str) -> bool:

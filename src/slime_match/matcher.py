@@ -16,7 +16,7 @@ from .errors import ConfigError, ImageError, caused_by_interrupt
 from .features.descriptors import resolve_descriptor
 from .geometry.backends import estimate_geometry
 from .io import MIN_IMAGE_SIDE, ImageLike, load_image
-from .pipelines import make_base_pipeline
+from .pipelines import PIPELINES, make_base_pipeline
 from .resize import resize_image, to_original
 from .result import MatchResult
 from .slime.pipeline import run_slime, stages_to_original
@@ -47,7 +47,7 @@ class Matcher:
         self.device = resolve_device(self.config.device)
         self.warnings: list[str] = []
         base = self.config.base
-        if base.name in ("hz+", "keynet") and base.descriptor == "auto":
+        if "descriptor" in PIPELINES[base.name].options and base.descriptor == "auto":
             fallback = "tfeat" if base.name == "keynet" else "rootsift"  # Key.Net's patch descriptors are networks
             base.descriptor, warning = resolve_descriptor("auto", weights_dir=base.weights_dir, fallback=fallback)
             if warning:
