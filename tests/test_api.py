@@ -78,6 +78,16 @@ def test_make_config_refuses_options_the_method_would_ignore(preset, options, me
         sm.make_config(preset, **options)
 
 
+@pytest.mark.parametrize(("options", "message"), [
+    ({"seed": -1}, "seed must be a non-negative integer, got -1"),
+    ({"seed": 1.5}, "seed must be a non-negative integer, got 1.5"),
+    ({"scales": (1, 2, 1)}, "scales must be distinct"),
+])
+def test_make_config_refuses_bad_values(options, message):
+    with pytest.raises(ConfigError, match=message):
+        sm.make_config("slime", **options)
+
+
 def test_make_config_takes_the_options_each_method_reads():
     assert sm.make_config("rootsift", upright=True, fginn_ratio=0.9).base.upright
     assert sm.make_config("hz+", base="hz+", **WEIGHT_FREE).base.shape == "baumberg"

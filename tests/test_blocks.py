@@ -115,3 +115,5 @@ def test_bad_config():
         BlockConfig(padding=200)
     with pytest.raises(ConfigError):
         BlockConfig(scales=(0, 1))
+    with pytest.raises(ConfigError, match="distinct"):
+        BlockConfig(scales=(1, 2, 1))

@@ -57,6 +57,8 @@ class MatchConfig:
             raise ConfigError(f"max_side must be an integer of at least {MIN_IMAGE_SIDE} px, got {self.max_side!r}")
         if not self.threshold > 0:
             raise ConfigError(f"threshold must be > 0 px, got {self.threshold}")
+        if not (isinstance(self.seed, numbers.Integral) and self.seed >= 0):
+            raise ConfigError(f"seed must be a non-negative integer, got {self.seed!r}")
         workers = self.slime.workers
         if workers is not None and not (isinstance(workers, numbers.Integral) and workers >= 1):
             raise ConfigError(f"workers must be an integer of at least 1 (None: one per available CPU), got {workers!r}")

@@ -76,6 +76,8 @@ class BlockConfig:
             raise ConfigError("BlockConfig: need 0 <= stride_tolerance < stride")
         if not self.scales or min(self.scales) < 1:
             raise ConfigError("BlockConfig: scales must be positive block counts")
+        if len(set(self.scales)) < len(self.scales):
+            raise ConfigError(f"BlockConfig: scales must be distinct, got {self.scales}")
 
     @property
     def core_size(self) -> int:
