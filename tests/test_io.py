@@ -127,3 +127,14 @@ def test_atomic_writers_follow_the_umask(tmp_path, umask):
         os.umask(previous)
     for name in ("a.npz", "a.json"):
         assert stat.S_IMODE((tmp_path / name).stat().st_mode) == 0o666 & ~umask
+
+
+def test_float_arrays_scale_and_non_finite_pixels():
+    g, _ = _gradient()
+    unit = g.astype(np.float32) / 255
+    np.testing.assert_allclose(load_image(g.astype(np.float32)), load_image(unit), atol=1e-6)  # 0..255 floats
+    holes = unit.copy()
+    holes[5, 7], holes[6, 8], holes[7, 9] = np.nan, np.inf, -np.inf
+    expected = unit.copy()
+    expected[5, 7] = expected[6, 8] = expected[7, 9] = 0.0  # black
+    np.testing.assert_array_equal(load_image(holes), load_image(expected))
