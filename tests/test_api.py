@@ -10,7 +10,7 @@ import torch
 
 import slime_match as sm
 from slime_match.cli import main
-from slime_match.errors import ConfigError
+from slime_match.errors import ConfigError, SlimeMatchError
 
 WEIGHT_FREE = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift"}
 
@@ -124,6 +124,20 @@ def test_save_and_load_round_trip(rgb_pair, reference, tmp_path, pair):
     from_cli = sm.MatchResult.load(out / "matches.npz")  # its summary is the folder's summary.json
     assert _same(from_cli, reference) and from_cli.inliers is None and from_cli.model is None
     assert from_cli.summary["method"] == "hz+"
+
+
+def test_load_refuses_files_that_are_not_matches(tmp_path):
+    with pytest.raises(SlimeMatchError, match="no such matches file"):
+        sm.MatchResult.load(tmp_path / "none.npz")
+    (tmp_path / "summary.json").write_text("{}")
+    with pytest.raises(SlimeMatchError, match=r"not a matches file \(not an .npz archive\)"):
+        sm.MatchResult.load(tmp_path / "summary.json")
+    np.savez(tmp_path / "other.npz", keypoints0=np.zeros((3, 2)))
+    with pytest.raises(SlimeMatchError, match="not a matches file: it has no keypoints1, scores"):
+        sm.MatchResult.load(tmp_path / "other.npz")
+    np.savez(tmp_path / "objects.npz", keypoints0=np.array([None, 1], dtype=object))
+    with pytest.raises(SlimeMatchError, match="not a readable matches file"):
+        sm.MatchResult.load(tmp_path / "objects.npz")
 
 
 def test_drawing_leaves_the_callers_matplotlib_backend_alone(tmp_path):

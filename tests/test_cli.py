@@ -193,6 +193,27 @@ def test_verbose_logs_stages_as_they_finish(pair, tmp_path, capsys, caplog):
 def test_viz_bad_input(tmp_path, capsys, pair):
     code, _, err = run_cli(capsys, "viz", tmp_path / "none.npz", *pair, "-o", tmp_path)
     assert code == 2 and "no such stages file" in err
+    text = tmp_path / "notes.npz"
+    text.write_text("not an archive")
+    code, _, err = run_cli(capsys, "viz", text, *pair, "-o", tmp_path)
+    assert code == 2 and "not a stages file (not an .npz archive)" in err
+    matches = tmp_path / "matches.npz"  # a matches file, without the stages
+    np.savez(matches, keypoints0=np.zeros((0, 2)), keypoints1=np.zeros((0, 2)), scores=np.zeros(0))
+    code, _, err = run_cli(capsys, "viz", matches, *pair, "-o", tmp_path / "viz")
+    assert code == 2 and "not a stages file: it has no blocks0, blocks1, tiles0 and" in err
+    assert "--save-stages" in err and not (tmp_path / "viz").exists()
+
+
+@pytest.mark.parametrize("command", [["match", "IMAGE0", "IMAGE1"], ["demo"], ["viz", "STAGES", "IMAGE0", "IMAGE1"],
+                                     ["bench", "graf"]])
+def test_output_folder_that_is_a_file_is_refused_up_front(tmp_path, capsys, pair, command):
+    blocker = tmp_path / "taken"
+    blocker.write_text("")
+    stand_in = {"IMAGE0": pair[0], "IMAGE1": pair[1], "STAGES": tmp_path / "stages.npz"}
+    args = [stand_in.get(part, part) for part in command]
+    for output, problem in ((blocker, "is a file"), (blocker / "run", f"lies under {blocker}, which is a file")):
+        code, _, err = run_cli(capsys, *args, "-o", output)
+        assert code == 2 and f"output folder {output} {problem}, not a folder" in err
 
 
 def test_demo_scores_the_real_pair(tmp_path, capsys):

@@ -235,6 +235,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _check_output_folder(path: str | None) -> None:
+    """Refuse, before any work, an output folder (``-o``) that is, or lies under, an existing file."""
+    if path is None:
+        return
+    existing = next(p for p in (Path(path), *Path(path).parents) if p.exists())  # "." or "/" at the latest
+    if not existing.is_dir():
+        where = "is" if existing == Path(path) else f"lies under {existing}, which is"
+        raise SlimeMatchError(f"output folder {path} {where} a file, not a folder: choose another -o")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -242,6 +252,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=level, format="%(levelname)s: %(message)s")
     logging.getLogger("slime_match").setLevel(level)  # also when the root logger was configured before
     try:
+        _check_output_folder(getattr(args, "output", None))
         return int(args.func(args) or 0)
     except SlimeMatchError as error:
         print(f"error: {error}", file=sys.stderr)

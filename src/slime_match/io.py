@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+import zipfile
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -13,7 +14,7 @@ import cv2
 import numpy as np
 import torch
 
-from .errors import ImageError
+from .errors import ImageError, SlimeMatchError
 
 MIN_IMAGE_SIDE = 32
 
@@ -118,6 +119,39 @@ def _to_float_rgb(array: np.ndarray, name: str) -> np.ndarray:
 def to_tensor(image: np.ndarray, device: str | torch.device = "cpu") -> torch.Tensor:
     """(H, W, 3) float array -> (3, H, W) float32 tensor on ``device``."""
     return torch.from_numpy(np.ascontiguousarray(image.transpose(2, 0, 1))).to(device=device, dtype=torch.float32)
+
+
+def load_npz(path: str | os.PathLike, what: str, required: tuple[str, ...] = (), hint: str = ""
+             ) -> dict[str, np.ndarray]:
+    """The arrays of an ``.npz`` file this package wrote.
+
+    Args:
+        path: the file.
+        what: what the file should be, for the messages (e.g. "matches file").
+        required: names of arrays it must hold.
+        hint: appended to the messages (e.g. how to write such a file).
+
+    Raises:
+        SlimeMatchError: the file is missing, not an .npz archive, unreadable or without a required array.
+    """
+    path = Path(path)
+    if not path.is_file():
+        problem = f"no such {what}"
+    elif not zipfile.is_zipfile(path):
+        problem = f"not a {what} (not an .npz archive)"
+    else:
+        try:
+            with np.load(path) as data:
+                arrays = {name: data[name] for name in data.files}
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
+            problem = f"not a readable {what} ({error})"
+        else:
+            missing = [name for name in required if name not in arrays]
+            if not missing:
+                return arrays
+            shown = ", ".join(missing[:3]) + (f" and {len(missing) - 3} more" if len(missing) > 3 else "")
+            problem = f"not a {what}: it has no {shown}"
+    raise SlimeMatchError(f"{path}: {problem}{hint}")
 
 
 def _atomic_write(path: Path, write) -> None:

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .io import save_json, save_npz
+from .io import load_npz, save_json, save_npz
 from .types import GeometryResult
 
 
@@ -90,13 +90,16 @@ class MatchResult:
     @classmethod
     def load(cls, path: str | os.PathLike) -> MatchResult:
         """Read a ``matches.npz`` written by :meth:`save` or by ``slime match``, with the summary beside it
-        (``<stem>.json`` from :meth:`save`, else the folder's ``summary.json``) when there is one."""
+        (``<stem>.json`` from :meth:`save`, else the folder's ``summary.json``) when there is one.
+
+        Raises:
+            SlimeMatchError: the file is missing, unreadable or not a matches file.
+        """
         path = Path(path)
-        with np.load(path) as data:
-            kind = "homography" if "H" in data else "fundamental" if "F" in data else None
-            model = data["H"] if "H" in data else data.get("F", None)
-            inliers = data.get("inliers", None)
-            arrays = (data["keypoints0"], data["keypoints1"], data["scores"], inliers, kind, model)
+        data = load_npz(path, "matches file", ("keypoints0", "keypoints1", "scores"))
+        kind = "homography" if "H" in data else "fundamental" if "F" in data else None
+        model = data["H"] if "H" in data else data.get("F", None)
+        arrays = (data["keypoints0"], data["keypoints1"], data["scores"], data.get("inliers", None), kind, model)
         summary_file = next((f for f in (path.with_suffix(".json"), path.parent / "summary.json") if f.is_file()),
                             None)
         summary = json.loads(summary_file.read_text()) if summary_file else {}

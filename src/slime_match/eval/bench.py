@@ -36,7 +36,7 @@ from slime_match.eval.methods import PAPER_METHODS, make_method, method_label, p
 from slime_match.geometry.backends import estimate_geometry
 from slime_match.geometry.fundamental import fundamental_8point
 from slime_match.geometry.homography import homography_dlt
-from slime_match.io import load_image, save_json, save_npz
+from slime_match.io import load_image, load_npz, save_json, save_npz
 from slime_match.resize import resize_image, to_original
 
 logger = logging.getLogger("slime_match")
@@ -279,10 +279,11 @@ def evaluate_pair(
 
 
 def _load_prediction(path: Path) -> dict[str, np.ndarray]:
-    with np.load(path) as data:
-        pred = {k: data[k] for k in ("keypoints0", "keypoints1", "scores", "seconds")}
-        pred["code"] = data["code"] if "code" in data.files else np.str_(UNKNOWN)
-        return pred
+    data = load_npz(path, "saved prediction", ("keypoints0", "keypoints1", "scores", "seconds"),
+                    hint="; delete it to recompute")
+    pred = {k: data[k] for k in ("keypoints0", "keypoints1", "scores", "seconds")}
+    pred["code"] = data.get("code", np.str_(UNKNOWN))
+    return pred
 
 
 def _warn_stale(records: list[dict[str, Any]], out: Path) -> None:

@@ -10,10 +10,19 @@ import numpy as np
 from matplotlib.patches import Rectangle
 
 from ..errors import SlimeMatchError
-from ..io import load_image, save_figure
+from ..io import load_image, load_npz, save_figure
 from ..viz import draw_matches, pair_figure, side_by_side
 
 STAGES = ("blocks", "tiles", "planes", "superset", "fbar", "ftheta", "tile_matches", "final")
+_SETS_KEYS = ("table_xy0", "table_xy1")
+STAGE_KEYS = {  # the stages.npz arrays each picture reads
+    "blocks": ("blocks0", "blocks1"),
+    "tiles": ("tiles0", "tiles1"),
+    "planes": ("planes_H", "block_matches_xy0", "block_matches_xy1", "block_matches_plane"),
+    **{name: (*_SETS_KEYS, f"{name}_indptr", f"{name}_indices") for name in ("superset", "fbar", "ftheta")},
+    "tile_matches": ("tile_matches_xy0", "tile_matches_xy1"),
+    "final": ("final_xy0", "final_xy1"),
+}
 
 
 def _set_colors(labels: np.ndarray, seed: int = 0) -> np.ndarray:
@@ -53,10 +62,8 @@ def render_stages(stages_path: str | os.PathLike, image0, image1, out_dir: str |
     unknown = sorted(set(names) - set(STAGES))
     if unknown:
         raise SlimeMatchError(f"unknown stage(s) {', '.join(unknown)}: choose among {', '.join(STAGES)}")
-    path = Path(stages_path)
-    if not path.is_file():
-        raise SlimeMatchError(f"{path}: no such stages file (write it with `slime match --save-stages`)")
-    data = dict(np.load(path))
+    required = tuple(dict.fromkeys(key for name in names for key in STAGE_KEYS[name]))
+    data = load_npz(stages_path, "stages file", required, hint="; write it with `slime match --save-stages`")
     img0, img1 = load_image(image0), load_image(image1)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
