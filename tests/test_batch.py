@@ -40,6 +40,9 @@ def test_read_pairs_format(images, tmp_path):
     assert [(j.name0, j.name1) for j in jobs] == [("left.png", "right.png"), ("left.png", "sub/right.png")]
     assert [j.folder for j in jobs] == ["left.png__right.png", "left.png__sub-right.png"]
     assert jobs[1].path1 == images / "sub" / "right.png"
+    windows = tmp_path / "windows.txt"  # a byte-order mark and CRLF line ends, as Windows editors write
+    windows.write_bytes("\ufeffleft.png right.png\r\nleft.png sub/right.png\r\n".encode("utf-8"))
+    assert [(j.name0, j.name1) for j in read_pairs(windows, images)] == [(j.name0, j.name1) for j in jobs]
 
 
 @pytest.mark.parametrize("text, error, words", [

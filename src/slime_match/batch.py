@@ -71,7 +71,7 @@ def read_pairs(pairs_file: str | os.PathLike, image_dir: str | os.PathLike = "."
     """
     path = Path(pairs_file)
     try:
-        lines = path.read_text().splitlines()
+        lines = path.read_text(encoding="utf-8-sig").splitlines()  # a BOM (Windows editors) is not a name
     except (OSError, UnicodeDecodeError) as error:
         raise ConfigError(f"cannot read the pairs file {path}: {error}") from None
     jobs: dict[tuple[str, str], PairJob] = {}
