@@ -28,8 +28,8 @@ def load_image(source: ImageLike) -> np.ndarray:
         source: a file path, a numpy array (H, W), (H, W, 1|3|4) of uint8/uint16/float, or a torch tensor
             (C, H, W) or (H, W, C) with C in {1, 3, 4}. Float inputs are assumed in [0, 1] (values above
             1.5 are taken as 0..255; NaN and infinite pixels as black). Grey is replicated to RGB; alpha is
-            dropped. Files are turned upright
-            by their EXIF orientation tag, as image viewers show them (keypoints are in that frame).
+            dropped. Files are turned upright by their EXIF orientation tag, as image viewers show them
+            (keypoints are in that frame).
 
     Returns:
         (H, W, 3) float32 array in [0, 1].

@@ -13,16 +13,15 @@ from ..errors import SlimeMatchError
 from ..io import load_image, load_npz, save_figure
 from ..viz import draw_matches, pair_figure, side_by_side
 
-STAGES = ("blocks", "tiles", "planes", "superset", "fbar", "ftheta", "tile_matches", "final")
-_SETS_KEYS = ("table_xy0", "table_xy1")
-STAGE_KEYS = {  # the stages.npz arrays each picture reads
+STAGE_KEYS = {  # each picture and the stages.npz arrays it reads
     "blocks": ("blocks0", "blocks1"),
     "tiles": ("tiles0", "tiles1"),
     "planes": ("planes_H", "block_matches_xy0", "block_matches_xy1", "block_matches_plane"),
-    **{name: (*_SETS_KEYS, f"{name}_indptr", f"{name}_indices") for name in ("superset", "fbar", "ftheta")},
+    **{name: ("table_xy0", "table_xy1", f"{name}_indptr", f"{name}_indices") for name in ("superset", "fbar", "ftheta")},
     "tile_matches": ("tile_matches_xy0", "tile_matches_xy1"),
     "final": ("final_xy0", "final_xy1"),
 }
+STAGES = tuple(STAGE_KEYS)
 
 
 def _set_colors(labels: np.ndarray, seed: int = 0) -> np.ndarray:
