@@ -278,12 +278,12 @@ def evaluate_pair(
 # driver
 
 
+_PREDICTION_ARRAYS = ("keypoints0", "keypoints1", "scores", "seconds")
+
+
 def _load_prediction(path: Path) -> dict[str, np.ndarray]:
-    data = load_npz(path, "saved prediction", ("keypoints0", "keypoints1", "scores", "seconds"),
-                    hint="; delete it to recompute")
-    pred = {k: data[k] for k in ("keypoints0", "keypoints1", "scores", "seconds")}
-    pred["code"] = data.get("code", np.str_(UNKNOWN))
-    return pred
+    data = load_npz(path, "saved prediction", _PREDICTION_ARRAYS, hint="; delete it to recompute")
+    return {k: data[k] for k in _PREDICTION_ARRAYS} | {"code": data.get("code", np.str_(UNKNOWN))}
 
 
 def _warn_stale(records: list[dict[str, Any]], out: Path) -> None:
