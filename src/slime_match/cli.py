@@ -1,5 +1,5 @@
-"""Command line: ``slime match``, ``slime pairs``, ``slime demo``, ``slime viz`` (and ``slime bench``
-from slime_match.eval)."""
+"""Command line: ``slime match``, ``slime pairs``, ``slime demo``, ``slime viz``, ``slime colmap`` (and
+``slime bench`` from slime_match.eval)."""
 
 from __future__ import annotations
 
@@ -185,6 +185,24 @@ def cmd_viz(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_colmap(args: argparse.Namespace) -> int:
+    from .colmap import export_run
+
+    summary = export_run(args.run, args.images, args.output, merge_radius=args.merge_radius,
+                         inliers_only=args.inliers_only, camera_mode=args.camera_mode,
+                         reconstruct=not args.no_reconstruct, seed=args.seed, threads=args.threads,
+                         overwrite=args.overwrite)
+    print(f"{summary['images']} images, {summary['keypoints']} keypoints, {summary['matches']} matches, "
+          f"{summary['verified_pairs']} of {summary['pairs']} pairs verified -> {Path(args.output) / 'database.db'}")
+    for index, model in enumerate(summary.get("models", [])):
+        print(f"model {index}: {model['registered_images']} of {summary['images']} images registered, "
+              f"{model['points3D']} 3D points, track length {model['mean_track_length']:.2f}, reprojection "
+              f"error {model['mean_reprojection_error']:.2f} px -> {Path(args.output) / 'sparse' / str(index)}")
+    if "models" in summary and not summary["models"]:
+        print("COLMAP reconstructed no model")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="slime", description="Image matching by bare homography (Slime)")
     parser.add_argument("--debug", action="store_true", help="show tracebacks and debug logs")
@@ -227,6 +245,32 @@ def build_parser() -> argparse.ArgumentParser:
     viz.add_argument("-o", "--output", required=True, help="output folder for the PNGs")
     viz.add_argument("--stage", action="append", default=None, help="stage name(s) to draw (default: all)")
     viz.set_defaults(func=cmd_viz)
+
+    from .colmap import CAMERA_MODES
+
+    colmap = sub.add_parser("colmap", help="a `slime pairs` run as a COLMAP database and its sparse "
+                                           "reconstruction (needs pycolmap)")
+    colmap.add_argument("run", help="run folder of `slime pairs`")
+    colmap.add_argument("--images", default=".", help="the image folder of the run (default: the current "
+                                                      "folder)")
+    colmap.add_argument("-o", "--output", required=True,
+                        help="output folder: database.db, pairs.txt, summary.json, sparse/N/ (COLMAP models)")
+    colmap.add_argument("--merge-radius", type=float, default=1.0,
+                        help="px: keypoints of an image within this distance (in x and in y) become one "
+                             "(default 1; 0: only identical positions)")
+    colmap.add_argument("--inliers-only", action="store_true",
+                        help="export only the run's RANSAC inliers (the run must have used --ransac)")
+    colmap.add_argument("--camera-mode", choices=CAMERA_MODES, default="auto",
+                        help="COLMAP's camera sharing among images (default auto)")
+    colmap.add_argument("--no-reconstruct", action="store_true",
+                        help="only write and verify the database (no incremental mapping)")
+    colmap.add_argument("--seed", type=int, default=0, help="COLMAP's random seed (default 0)")
+    colmap.add_argument("--threads", type=positive_int, default=1,
+                        help="COLMAP's mapping threads (default 1: the same models on every run; more is faster "
+                             "on large runs but not reproducible)")
+    colmap.add_argument("--overwrite", action="store_true", help="replace an earlier export in the output folder")
+    colmap.add_argument("-v", "--verbose", action="store_true", help="log each step and COLMAP's own output")
+    colmap.set_defaults(func=cmd_colmap)
 
     from .eval.bench import add_bench_parser
 

@@ -1,0 +1,281 @@
+"""A ``slime pairs`` run as a COLMAP database, and optionally its sparse reconstruction (``slime colmap``).
+
+Slime matches each pair on its own: one image's keypoints differ from pair to pair, and within a pair a
+keypoint may take part in several matches (Slime keeps duplicated keypoints of overlapping blocks). COLMAP
+wants one keypoint list per image and one-to-one matches per pair. So, per image, every keypoint of every
+pair it is in is pooled, exact duplicates merged, and the rest clustered greedily around the best-scored
+ones within ``merge_radius`` px (``slime.clusters.greedy_clusters``): each cluster becomes one COLMAP
+keypoint at its representative's position. Per pair, the matches then map to keypoint pairs, of which a
+one-to-one subset is kept by score (``matching.nn_kernels.greedy_accept``). COLMAP's own geometric
+verification and incremental mapper (pycolmap, an optional dependency) do the rest.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .batch import INDEX_FILE
+from .errors import ConfigError, ImageError, SlimeMatchError
+from .io import load_npz, save_json
+from .matching.nn_kernels import greedy_accept
+from .outputs import MATCHES_FILE, SUMMARY_FILE
+from .slime.clusters import greedy_clusters
+
+logger = logging.getLogger("slime_match")
+
+DATABASE_FILE = "database.db"
+VERIFIED_PAIRS_FILE = "pairs.txt"
+SPARSE_FOLDER = "sparse"
+CAMERA_MODES = ("auto", "single", "per-folder", "per-image")
+
+
+@dataclass
+class PairMatches:
+    """The matches of one pair of a run.
+
+    Attributes:
+        name0, name1: image names (relative to the image folder).
+        keypoints0, keypoints1: (K, 2) float64 positions in pixels, top-left pixel centre = (0, 0).
+        scores: (K,) dissimilarities, lower is better.
+    """
+
+    name0: str
+    name1: str
+    keypoints0: np.ndarray
+    keypoints1: np.ndarray
+    scores: np.ndarray
+
+
+def read_run(run: str | os.PathLike, inliers_only: bool = False) -> list[PairMatches]:
+    """The finished pairs of a ``slime pairs`` run folder, in its index's order.
+
+    Args:
+        run: the run folder (holds ``pairs.json``).
+        inliers_only: keep only the matches the run's RANSAC accepted (the run must have used ``--ransac``).
+
+    Raises:
+        SlimeMatchError: no ``pairs.json``, no finished pair, or (``inliers_only``) a pair without inliers.
+    """
+    run = Path(run)
+    try:
+        records = json.loads((run / INDEX_FILE).read_text())["pairs"]
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise SlimeMatchError(f"{run} is not a `slime pairs` run folder (cannot read its {INDEX_FILE}: "
+                              f"{error})") from None
+    pairs = []
+    for record in records:
+        if record.get("status") not in ("done", "skipped"):
+            continue
+        required = ("keypoints0", "keypoints1", "scores") + (("inliers",) if inliers_only else ())
+        hint = "match the pairs with --ransac to use --inliers-only" if inliers_only else ""
+        arrays = load_npz(run / record["folder"] / MATCHES_FILE, "matches file", required, hint)
+        keep = arrays["inliers"].astype(bool) if inliers_only else slice(None)
+        pairs.append(PairMatches(record["image0"], record["image1"], arrays["keypoints0"][keep],
+                                 arrays["keypoints1"][keep], arrays["scores"][keep]))
+    if not pairs:
+        raise SlimeMatchError(f"{run} has no finished pair ({INDEX_FILE} lists {len(records)} pairs)")
+    return pairs
+
+
+def merge_keypoints(pairs: list[PairMatches], merge_radius: float = 1.0
+                    ) -> tuple[dict[str, np.ndarray], list[np.ndarray]]:
+    """One keypoint list per image and one-to-one matches per pair.
+
+    Args:
+        pairs: the matches of each pair.
+        merge_radius: keypoints of one image within this distance (px, in both coordinates) of a
+            better-scored one become one with it; 0 merges only identical positions.
+
+    Returns:
+        keypoints: per image name, (N, 2) float64 positions (px), best-scored first.
+        matches: per pair, (M, 2) int64 indices into its two images' keypoints, one-to-one, best first.
+    """
+    if merge_radius < 0:
+        raise ConfigError(f"merge_radius must be >= 0 px, got {merge_radius}")
+    pooled: dict[str, list[tuple[int, int]]] = {}  # image -> (pair, side) in pooling order
+    for p, pair in enumerate(pairs):
+        pooled.setdefault(pair.name0, []).append((p, 0))
+        pooled.setdefault(pair.name1, []).append((p, 1))
+    keypoints: dict[str, np.ndarray] = {}
+    index_of: dict[tuple[int, int], np.ndarray] = {}
+    for name, members in pooled.items():
+        points = np.concatenate([_side(pairs[p], s) for p, s in members]).astype(np.float64)
+        scores = np.concatenate([pairs[p].scores for p, _ in members]).astype(np.float64)
+        unique, inverse = np.unique(points, axis=0, return_inverse=True)
+        best = np.full(len(unique), np.inf)
+        np.minimum.at(best, inverse.reshape(-1), scores)
+        reps, cluster = greedy_clusters(unique, best, merge_radius)
+        keypoints[name] = unique[reps]
+        ids = cluster[inverse.reshape(-1)]
+        bounds = np.cumsum([0] + [len(pairs[p].scores) for p, _ in members])
+        for (p, s), start, stop in zip(members, bounds[:-1], bounds[1:]):
+            index_of[p, s] = ids[start:stop]
+    matches = []
+    for p, pair in enumerate(pairs):
+        ids = np.stack([index_of[p, 0], index_of[p, 1]], 1)
+        order = np.argsort(pair.scores, kind="stable")
+        accepted = greedy_accept(ids[:, 0], ids[:, 1], order, 1) if len(ids) else np.zeros(0, bool)
+        matches.append(ids[order[accepted[order]]])
+    return keypoints, matches
+
+
+def _side(pair: PairMatches, side: int) -> np.ndarray:
+    return pair.keypoints0 if side == 0 else pair.keypoints1
+
+
+def _pycolmap():
+    try:
+        import pycolmap  # an optional dependency: the package's "colmap" extra
+    except ImportError as error:
+        raise ConfigError("slime colmap needs pycolmap: pip install 'slime-match[colmap]' (or pycolmap)"
+                          ) from error
+    return pycolmap
+
+
+def write_database(path: str | os.PathLike, image_dir: str | os.PathLike, keypoints: dict[str, np.ndarray],
+                   pairs: list[PairMatches], matches: list[np.ndarray], camera_mode: str = "auto") -> None:
+    """Create the COLMAP database ``path``: images (cameras from their EXIF data, as COLMAP does), keypoints
+    (COLMAP's pixel convention: top-left pixel centre = (0.5, 0.5)) and raw matches.
+
+    Args:
+        image_dir: the folder the image names are relative to.
+        keypoints, matches: from :func:`merge_keypoints` (``matches`` in ``pairs`` order).
+        camera_mode: "auto", "single", "per-folder" or "per-image" (COLMAP's camera sharing).
+    """
+    pycolmap = _pycolmap()
+    if camera_mode not in CAMERA_MODES:
+        raise ConfigError(f"camera_mode must be one of {', '.join(CAMERA_MODES)}, got {camera_mode!r}")
+    mode = pycolmap.CameraMode.__members__[camera_mode.upper().replace("-", "_")]
+    pycolmap.Database.open(path).close()  # import_images needs the file
+    pycolmap.import_images(path, image_dir, mode, sorted(keypoints))
+    with pycolmap.Database.open(path) as db:
+        ids = {image.name: image.image_id for image in db.read_all_images()}
+        missing = sorted(set(keypoints) - set(ids))
+        if missing:
+            raise SlimeMatchError(f"COLMAP could not import {len(missing)} image(s) from {image_dir}: "
+                                  f"{', '.join(missing[:5])}")
+        for name, points in keypoints.items():
+            db.write_keypoints(ids[name], (points + 0.5).astype(np.float32))
+        for pair, pair_matches in zip(pairs, matches):
+            db.write_matches(ids[pair.name0], ids[pair.name1], pair_matches.astype(np.uint32))
+
+
+def export_run(run: str | os.PathLike, image_dir: str | os.PathLike, output: str | os.PathLike,
+               merge_radius: float = 1.0, inliers_only: bool = False, camera_mode: str = "auto",
+               reconstruct: bool = True, seed: int = 0, threads: int = 1, overwrite: bool = False
+               ) -> dict[str, Any]:
+    """A ``slime pairs`` run as a COLMAP database, geometrically verified by COLMAP, and (``reconstruct``)
+    COLMAP's incremental reconstruction of it.
+
+    Writes ``output/{database.db, pairs.txt, summary.json}`` and, with ``reconstruct``, ``output/sparse/N/``
+    (COLMAP's binary model files, largest model first), all or nothing.
+
+    Args:
+        run: the ``slime pairs`` run folder; image_dir: the folder its image names are relative to.
+        merge_radius, inliers_only: see :func:`merge_keypoints`, :func:`read_run`.
+        camera_mode: see :func:`write_database`.
+        seed: COLMAP's random seed (verification and mapping).
+        threads: COLMAP's mapping threads; with 1 the models are the same on every run, with more (faster on
+            large runs) they may differ slightly.
+        overwrite: replace ``output`` when it holds an earlier export (a non-empty folder is refused
+            otherwise).
+
+    Returns:
+        The summary (also ``summary.json``): keypoints and matches kept, verified pairs and, per model,
+        registered images, 3D points, mean track length and mean reprojection error (px).
+    """
+    pycolmap = _pycolmap()
+    if seed < 0:
+        raise ConfigError(f"seed must be a non-negative integer, got {seed}")
+    if threads < 1:
+        raise ConfigError(f"threads must be >= 1, got {threads}")
+    out = Path(output)
+    _check_output(out, overwrite)
+    start = time.perf_counter()
+    pairs = read_run(run, inliers_only)
+    names = sorted({name for pair in pairs for name in (pair.name0, pair.name1)})
+    missing = [name for name in names if not (Path(image_dir) / name).is_file()]
+    if missing:
+        raise ImageError(f"{len(missing)} image(s) of the run not found in {image_dir}: {', '.join(missing[:5])}"
+                         + (f" and {len(missing) - 5} more" if len(missing) > 5 else ""))
+    keypoints, matches = merge_keypoints(pairs, merge_radius)
+    logger.info("COLMAP export: %d images, %d keypoints, %d one-to-one matches in %d pairs", len(keypoints),
+                sum(len(k) for k in keypoints.values()), sum(len(m) for m in matches), len(pairs))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}-staging-"))
+    quiet = logger.getEffectiveLevel() > logging.INFO
+    log_level = pycolmap.logging.minloglevel
+    try:
+        if quiet:
+            pycolmap.logging.minloglevel = 2  # COLMAP's errors only: its info lines run to thousands
+        database = staging / DATABASE_FILE
+        write_database(database, image_dir, keypoints, pairs, matches, camera_mode)
+        pairs_file = staging / VERIFIED_PAIRS_FILE
+        pairs_file.write_text("".join(f"{p.name0} {p.name1}\n" for p in pairs))
+        verification = pycolmap.TwoViewGeometryOptions()
+        verification.ransac.random_seed = seed
+        pycolmap.verify_matches(database, pairs_file, verification)
+        with pycolmap.Database.open(database) as db:
+            verified = db.num_verified_image_pairs()
+        logger.info("COLMAP export: %d of %d pairs verified", verified, len(pairs))
+        summary: dict[str, Any] = {
+            "run": str(run), "images": len(keypoints), "pairs": len(pairs), "verified_pairs": verified,
+            "merge_radius": merge_radius, "inliers_only": inliers_only, "camera_mode": camera_mode,
+            "keypoints": int(sum(len(k) for k in keypoints.values())),
+            "matches": int(sum(len(m) for m in matches)),
+        }
+        if reconstruct:
+            summary["models"] = _reconstruct(pycolmap, database, Path(image_dir), staging / SPARSE_FOLDER, seed,
+                                            threads)
+        summary["seconds"] = round(time.perf_counter() - start, 2)
+        save_json(staging / SUMMARY_FILE, summary)
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(staging, out)
+    finally:
+        pycolmap.logging.minloglevel = log_level
+        shutil.rmtree(staging, ignore_errors=True)
+    return summary
+
+
+def _check_output(out: Path, overwrite: bool) -> None:
+    """Refuse an output folder that is not empty, unless ``overwrite`` and it holds an earlier export."""
+    if not out.is_dir() or not any(out.iterdir()):
+        return
+    if not (out / DATABASE_FILE).is_file():
+        raise ConfigError(f"{out} is not empty and holds no COLMAP export: choose another output folder")
+    if not overwrite:
+        raise ConfigError(f"{out} holds an earlier COLMAP export: use --overwrite to replace it")
+
+
+def _reconstruct(pycolmap, database: Path, image_dir: Path, sparse: Path, seed: int, threads: int
+                 ) -> list[dict[str, Any]]:
+    """COLMAP's incremental mapping into ``sparse/N``, largest model first; the statistics of each model."""
+    options = pycolmap.IncrementalPipelineOptions()
+    options.random_seed = seed
+    options.num_threads = threads
+    work = sparse.with_name(sparse.name + "-unsorted")
+    work.mkdir()
+    models = pycolmap.incremental_mapping(database, image_dir, work, options)
+    ranked = sorted(models.values(), key=lambda model: model.num_reg_images(), reverse=True)
+    sparse.mkdir()
+    stats = []
+    for index, model in enumerate(ranked):
+        (sparse / str(index)).mkdir()
+        model.write(sparse / str(index))
+        stats.append({"registered_images": model.num_reg_images(), "points3D": model.num_points3D(),
+                      "mean_track_length": round(model.compute_mean_track_length(), 3),
+                      "mean_reprojection_error": round(model.compute_mean_reprojection_error(), 3),
+                      "images": sorted(image.name for image in model.images.values() if image.has_pose)})
+    shutil.rmtree(work)
+    return stats
