@@ -107,6 +107,19 @@ def test_write_database_round_trip(tmp_path, small_images):
         for name, points in keypoints.items():  # COLMAP's top-left pixel centre is (0.5, 0.5)
             np.testing.assert_allclose(db.read_keypoints(ids[name])[:, :2], points + 0.5, atol=1e-5)
         np.testing.assert_array_equal(db.read_matches(ids["a.png"], ids["b.png"]), matches[0])
+    with pytest.raises(ConfigError, match="camera_mode"):
+        write_database(tmp_path / "db2.db", small_images, keypoints, pairs, matches, camera_mode="shared")
+
+
+def test_export_without_reconstruction_and_an_image_without_matches(tmp_path, small_images):
+    pytest.importorskip("pycolmap")
+    empty = PairMatches("b.png", "c.png", np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
+    run = _run_folder(tmp_path, [_pairs()[0], empty])  # c.png takes part in no match
+    summary = export_run(run, small_images, tmp_path / "out", reconstruct=False)
+    assert (summary["images"], summary["pairs"], summary["keypoints"], summary["matches"]) == (3, 2, 5, 2)
+    assert "models" not in summary and json.loads((tmp_path / "out" / "summary.json").read_text()) == summary
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["database.db", "pairs.txt", "summary.json"]
+    assert [p.name for p in tmp_path.iterdir() if "staging" in p.name] == []
 
 
 def test_export_refuses_bad_output_and_missing_images(tmp_path, small_images):
@@ -123,6 +136,9 @@ def test_export_refuses_bad_output_and_missing_images(tmp_path, small_images):
     assert not (tmp_path / "out").exists()
     with pytest.raises(ConfigError, match="seed"):
         export_run(run, small_images, tmp_path / "out", seed=-1)
+    (tmp_path / "afile").write_text("")
+    with pytest.raises(ConfigError, match="is a file"):
+        export_run(run, small_images, tmp_path / "afile")
 
 
 def test_missing_pycolmap_is_a_clear_error(tmp_path, small_images, monkeypatch):

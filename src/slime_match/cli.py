@@ -199,7 +199,8 @@ def cmd_colmap(args: argparse.Namespace) -> int:
               f"{model['points3D']} 3D points, track length {model['mean_track_length']:.2f}, reprojection "
               f"error {model['mean_reprojection_error']:.2f} px -> {Path(args.output) / 'sparse' / str(index)}")
     if "models" in summary and not summary["models"]:
-        print("COLMAP reconstructed no model")
+        print("COLMAP reconstructed no model (it found no image pair with enough verified matches and baseline "
+              "to start from)")
     return 0
 
 

@@ -249,7 +249,10 @@ def export_run(run: str | os.PathLike, image_dir: str | os.PathLike, output: str
 
 
 def _check_output(out: Path, overwrite: bool) -> None:
-    """Refuse an output folder that is not empty, unless ``overwrite`` and it holds an earlier export."""
+    """Refuse an output folder that is a file or is not empty, unless ``overwrite`` and it holds an earlier
+    export."""
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"output folder {out} is a file, not a folder: choose another output folder")
     if not out.is_dir() or not any(out.iterdir()):
         return
     if not (out / DATABASE_FILE).is_file():
