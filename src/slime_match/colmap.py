@@ -16,6 +16,7 @@ import json
 import logging
 import os
 import shutil
+import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -23,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tqdm import tqdm
 
 from .batch import INDEX_FILE
 from .errors import ConfigError, ImageError, SlimeMatchError
@@ -269,7 +271,10 @@ def _reconstruct(pycolmap, database: Path, image_dir: Path, sparse: Path, seed: 
     options.num_threads = threads
     work = sparse.with_name(sparse.name + "-unsorted")
     work.mkdir()
-    models = pycolmap.incremental_mapping(database, image_dir, work, options)
+    with tqdm(desc="COLMAP mapping", unit=" images registered", file=sys.stderr, disable=None) as progress:
+        models = pycolmap.incremental_mapping(database, image_dir, work, options,
+                                              initial_image_pair_callback=lambda: progress.update(2),
+                                              next_image_callback=lambda: progress.update(1))
     ranked = sorted(models.values(), key=lambda model: model.num_reg_images(), reverse=True)
     sparse.mkdir()
     stats = []
