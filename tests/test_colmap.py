@@ -1,6 +1,7 @@
 """``slime colmap``: keypoints merged across pairs, one-to-one matches, the COLMAP database, reconstruction."""
 
 import json
+import shutil
 
 import cv2
 import numpy as np
@@ -8,10 +9,17 @@ import pytest
 from conftest import DATA, require, run_cli
 
 from slime_match.batch import match_pairs, read_pairs
-from slime_match.colmap import PairMatches, export_run, merge_keypoints, read_run, write_database
+from slime_match.colmap import (
+    PairMatches,
+    export_run,
+    merge_keypoints,
+    read_run,
+    to_stored_frame,
+    write_database,
+)
 from slime_match.config import make_config
 from slime_match.errors import ConfigError, ImageError, SlimeMatchError
-from slime_match.io import save_json, save_npz
+from slime_match.io import load_image, save_json, save_npz
 
 SACRE_COEUR = DATA / "sacre_coeur"
 # three views with enough baseline for COLMAP's initial pair (the strongest-matched triples are too close)
@@ -71,6 +79,24 @@ def _run_folder(tmp_path, pairs: list[PairMatches], inliers: bool = False):
     records.append({"image0": "a.png", "image1": "x.png", "folder": "a.png__x.png", "status": "failed"})
     save_json(run / "pairs.json", {"pairs": records, "finished": True})
     return run
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_keypoints_go_to_the_stored_frame_of_exif_turned_files(tmp_path, orientation):
+    from PIL import Image
+
+    path = tmp_path / "turned.jpg"
+    exif = Image.Exif()
+    exif[0x0112] = orientation  # EXIF Orientation
+    stored_rgb = np.random.default_rng(orientation).integers(0, 255, (40, 56, 3), dtype=np.uint8)
+    Image.fromarray(stored_rgb).save(path, exif=exif.tobytes(), quality=100)
+    upright = load_image(path)  # what the keypoints of a run refer to
+    stored = cv2.imread(str(path), cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)[:, :, ::-1]
+    assert upright.shape[:2] == (stored.shape[:2] if orientation <= 4 else stored.shape[1::-1])
+    ys, xs = np.mgrid[: upright.shape[0], : upright.shape[1]]
+    points = np.stack([xs.ravel(), ys.ravel()], 1).astype(float)
+    sx, sy = to_stored_frame(points, path).round().astype(int).T
+    np.testing.assert_allclose(upright[ys.ravel(), xs.ravel()] * 255, stored[sy, sx], atol=0.01)
 
 
 def test_read_run(tmp_path):
@@ -148,21 +174,34 @@ def test_missing_pycolmap_is_a_clear_error(tmp_path, small_images, monkeypatch):
 
 
 @pytest.fixture(scope="module")
-def sacre_coeur_run(tmp_path_factory):
-    """Slime (weight-free) on the three pairs of TRIPLE, as `slime pairs` writes them."""
+def sacre_coeur(tmp_path_factory):
+    """The photos of TRIPLE, the second stored turned by 90° with an EXIF orientation that turns it back (as
+    phones save portrait photos), and Slime's matches of their three pairs (weight-free), as `slime pairs`
+    writes them: (image folder, run folder)."""
+    from PIL import Image
+
     require(SACRE_COEUR)
     folder = tmp_path_factory.mktemp("sacre_coeur")
+    images = folder / "images"
+    images.mkdir()
+    for name in TRIPLE:
+        shutil.copy(SACRE_COEUR / name, images / name)
+    exif = Image.Exif()
+    exif[0x0112] = 6  # shown turned 90° clockwise
+    Image.open(SACRE_COEUR / TRIPLE[1]).transpose(Image.Transpose.ROTATE_90).save(
+        images / TRIPLE[1], exif=exif.tobytes(), quality=95)
     (folder / "pairs.txt").write_text(f"{TRIPLE[0]} {TRIPLE[1]}\n{TRIPLE[0]} {TRIPLE[2]}\n{TRIPLE[1]} {TRIPLE[2]}\n")
     config = make_config("slime", shape="baumberg", orientation="gradient", descriptor="rootsift")
-    records = match_pairs(config, read_pairs(folder / "pairs.txt", SACRE_COEUR), folder / "run")
+    records = match_pairs(config, read_pairs(folder / "pairs.txt", images), folder / "run")
     assert all(r["status"] == "done" for r in records)
-    return folder / "run"
+    return images, folder / "run"
 
 
-def test_slime_colmap_reconstructs_real_photos(sacre_coeur_run, tmp_path, capsys):
-    pytest.importorskip("pycolmap")
+def test_slime_colmap_reconstructs_real_photos(sacre_coeur, tmp_path, capsys):
+    pycolmap = pytest.importorskip("pycolmap")
+    images, run = sacre_coeur
     out = tmp_path / "sfm"
-    code, stdout, _ = run_cli(capsys, "colmap", sacre_coeur_run, "--images", SACRE_COEUR, "-o", out)
+    code, stdout, _ = run_cli(capsys, "colmap", run, "--images", images, "-o", out)
     assert code == 0, stdout
     assert "3 of 3 pairs verified" in stdout and "model 0: 3 of 3 images registered" in stdout
     summary = json.loads((out / "summary.json").read_text())
@@ -170,12 +209,17 @@ def test_slime_colmap_reconstructs_real_photos(sacre_coeur_run, tmp_path, capsys
     assert sorted(model["images"]) == sorted(TRIPLE)
     assert model["points3D"] >= 50 and model["mean_reprojection_error"] < 2.0
     assert {p.name for p in (out / "sparse" / "0").iterdir()} >= {"cameras.bin", "images.bin", "points3D.bin"}
+    model = pycolmap.Reconstruction(out / "sparse" / "0")
+    turned = next(image for image in model.images.values() if image.name == TRIPLE[1])
+    camera = model.cameras[turned.camera_id]
+    assert (camera.width, camera.height) == (694, 1068)  # COLMAP reads the stored pixels
+    xy = np.array([point.xy for point in turned.points2D])
+    assert len(xy) > 100 and (xy >= 0).all() and (xy <= [camera.width, camera.height]).all()
 
-    code, _, stderr = run_cli(capsys, "colmap", sacre_coeur_run, "--images", SACRE_COEUR, "-o", out,
-                              "--no-reconstruct")
+    code, _, stderr = run_cli(capsys, "colmap", run, "--images", images, "-o", out, "--no-reconstruct")
     assert code == 2 and "--overwrite" in stderr
-    code, stdout, _ = run_cli(capsys, "colmap", sacre_coeur_run, "--images", SACRE_COEUR, "-o", out,
-                              "--no-reconstruct", "--overwrite")
+    code, stdout, _ = run_cli(capsys, "colmap", run, "--images", images, "-o", out, "--no-reconstruct",
+                              "--overwrite")
     assert code == 0 and "model" not in stdout and not (out / "sparse").exists()
 
 

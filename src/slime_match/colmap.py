@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
@@ -135,6 +136,46 @@ def _side(pair: PairMatches, side: int) -> np.ndarray:
     return pair.keypoints0 if side == 0 else pair.keypoints1
 
 
+# The eight ways a file's EXIF orientation turns its stored pixels (raw, h x w) into the upright image:
+# (the upright array from the raw one, the raw (x, y) of upright pixel centres (x, y)).
+_ORIENTATIONS = (
+    (lambda a: a, lambda x, y, w, h: (x, y)),
+    (lambda a: a[:, ::-1], lambda x, y, w, h: (w - 1 - x, y)),
+    (lambda a: a[::-1, ::-1], lambda x, y, w, h: (w - 1 - x, h - 1 - y)),
+    (lambda a: a[::-1], lambda x, y, w, h: (x, h - 1 - y)),
+    (lambda a: a.T, lambda x, y, w, h: (y, x)),
+    (lambda a: np.rot90(a, -1), lambda x, y, w, h: (y, h - 1 - x)),
+    (lambda a: a[::-1, ::-1].T, lambda x, y, w, h: (w - 1 - y, h - 1 - x)),
+    (lambda a: np.rot90(a, 1), lambda x, y, w, h: (w - 1 - y, x)),
+)
+
+
+def to_stored_frame(points: np.ndarray, path: str | os.PathLike) -> np.ndarray:
+    """Keypoints of an upright image file (turned by its EXIF orientation, as ``io.load_image`` does) in the
+    frame of its stored pixels, which COLMAP reads.
+
+    Args:
+        points: (N, 2) positions (px) in the upright image, top-left pixel centre = (0, 0).
+        path: the image file.
+
+    Returns:
+        (N, 2) positions in the stored pixels (the same positions when the file has no EXIF turn).
+
+    Raises:
+        ImageError: the file cannot be decoded, or no turn of its stored pixels gives its upright image.
+    """
+    data = np.fromfile(str(path), dtype=np.uint8)
+    upright = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE) if data.size else None
+    stored = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE | cv2.IMREAD_IGNORE_ORIENTATION) if data.size else None
+    if upright is None or stored is None:
+        raise ImageError(f"{path}: not a readable image (corrupt file or unsupported format)")
+    h, w = stored.shape
+    for turn, stored_xy in _ORIENTATIONS:
+        if turn(stored).shape == upright.shape and np.array_equal(turn(stored), upright):
+            return np.stack(stored_xy(*points.T, w, h), 1)
+    raise ImageError(f"{path}: its upright image is no turn of its stored pixels (EXIF orientation)")
+
+
 def _pycolmap():
     try:
         import pycolmap  # an optional dependency: the package's "colmap" extra
@@ -147,7 +188,8 @@ def _pycolmap():
 def write_database(path: str | os.PathLike, image_dir: str | os.PathLike, keypoints: dict[str, np.ndarray],
                    pairs: list[PairMatches], matches: list[np.ndarray], camera_mode: str = "auto") -> None:
     """Create the COLMAP database ``path``: images (cameras from their EXIF data, as COLMAP does), keypoints
-    (COLMAP's pixel convention: top-left pixel centre = (0.5, 0.5)) and raw matches.
+    (in the frame of the stored pixels, which COLMAP does not turn by the EXIF orientation, and with COLMAP's
+    pixel convention: top-left pixel centre = (0.5, 0.5)) and raw matches.
 
     Args:
         image_dir: the folder the image names are relative to.
@@ -167,7 +209,8 @@ def write_database(path: str | os.PathLike, image_dir: str | os.PathLike, keypoi
             raise SlimeMatchError(f"COLMAP could not import {len(missing)} image(s) from {image_dir}: "
                                   f"{', '.join(missing[:5])}")
         for name, points in keypoints.items():
-            db.write_keypoints(ids[name], (points + 0.5).astype(np.float32))
+            stored = to_stored_frame(points, Path(image_dir) / name)
+            db.write_keypoints(ids[name], (stored + 0.5).astype(np.float32))
         for pair, pair_matches in zip(pairs, matches):
             db.write_matches(ids[pair.name0], ids[pair.name1], pair_matches.astype(np.uint32))
 
