@@ -60,8 +60,9 @@ def test_merge_keypoints_empty_pair_and_bad_radius():
     empty = PairMatches("a.png", "d.png", np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
     keypoints, matches = merge_keypoints([*_pairs(), empty])
     assert keypoints["d.png"].shape == (0, 2) and matches[2].shape == (0, 2)
-    with pytest.raises(ConfigError, match="merge_radius"):
-        merge_keypoints(_pairs(), merge_radius=-1)
+    for bad in (-1, float("nan")):
+        with pytest.raises(ConfigError, match="merge_radius"):
+            merge_keypoints(_pairs(), merge_radius=bad)
 
 
 def _run_folder(tmp_path, pairs: list[PairMatches], inliers: bool = False):

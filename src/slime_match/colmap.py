@@ -103,7 +103,7 @@ def merge_keypoints(pairs: list[PairMatches], merge_radius: float = 1.0
         keypoints: per image name, (N, 2) float64 positions (px), best-scored first.
         matches: per pair, (M, 2) int64 indices into its two images' keypoints, one-to-one, best first.
     """
-    if merge_radius < 0:
+    if not merge_radius >= 0:  # NaN too
         raise ConfigError(f"merge_radius must be >= 0 px, got {merge_radius}")
     pooled: dict[str, list[tuple[int, int]]] = {}  # image -> (pair, side) in pooling order
     for p, pair in enumerate(pairs):
