@@ -27,7 +27,7 @@ from tqdm import tqdm
 from . import __version__
 from .config import MatchConfig
 from .cpus import available_cpus
-from .errors import ConfigError, ImageError
+from .errors import ConfigError, ImageError, some_of
 from .io import jsonable, load_image, save_json
 from .matcher import Matcher
 from .outputs import SUMMARY_FILE, is_complete, write_pair_outputs
@@ -94,8 +94,8 @@ def read_pairs(pairs_file: str | os.PathLike, image_dir: str | os.PathLike = "."
         raise ConfigError(f"{path} lists no pair (one 'image0 image1' per line)")
     missing = sorted({str(p) for job in jobs.values() for p in (job.path0, job.path1) if not p.is_file()})
     if missing:
-        shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
-        raise ImageError(f"{len(missing)} image(s) listed in {path} not found (image folder {image_dir}): {shown}")
+        raise ImageError(f"{len(missing)} image(s) listed in {path} not found (image folder {image_dir}): "
+                         f"{some_of(missing, 5)}")
     return list(jobs.values())
 
 

@@ -186,18 +186,18 @@ def cmd_viz(args: argparse.Namespace) -> int:
 
 
 def cmd_colmap(args: argparse.Namespace) -> int:
-    from .colmap import export_run
+    from .colmap import DATABASE_FILE, SPARSE_FOLDER, export_run
 
     summary = export_run(args.run, args.images, args.output, merge_radius=args.merge_radius,
                          inliers_only=args.inliers_only, camera_mode=args.camera_mode,
                          reconstruct=not args.no_reconstruct, seed=args.seed, threads=args.threads,
                          overwrite=args.overwrite)
     print(f"{summary['images']} images, {summary['keypoints']} keypoints, {summary['matches']} matches, "
-          f"{summary['verified_pairs']} of {summary['pairs']} pairs verified -> {Path(args.output) / 'database.db'}")
+          f"{summary['verified_pairs']} of {summary['pairs']} pairs verified -> {Path(args.output) / DATABASE_FILE}")
     for index, model in enumerate(summary.get("models", [])):
         print(f"model {index}: {model['registered_images']} of {summary['images']} images registered, "
               f"{model['points3D']} 3D points, track length {model['mean_track_length']:.2f}, reprojection "
-              f"error {model['mean_reprojection_error']:.2f} px -> {Path(args.output) / 'sparse' / str(index)}")
+              f"error {model['mean_reprojection_error']:.2f} px -> {Path(args.output) / SPARSE_FOLDER / str(index)}")
     if "models" in summary and not summary["models"]:
         print("COLMAP reconstructed no model (it found no image pair with enough verified matches and baseline "
               "to start from)")

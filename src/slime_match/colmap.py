@@ -28,7 +28,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .batch import INDEX_FILE
-from .errors import ConfigError, ImageError, SlimeMatchError
+from .errors import ConfigError, ImageError, SlimeMatchError, some_of
 from .io import load_npz, save_json
 from .matching.nn_kernels import greedy_accept
 from .outputs import MATCHES_FILE, SUMMARY_FILE
@@ -171,7 +171,7 @@ def to_stored_frame(points: np.ndarray, path: str | os.PathLike) -> np.ndarray:
         raise ImageError(f"{path}: not a readable image (corrupt file or unsupported format)")
     h, w = stored.shape
     for turn, stored_xy in _ORIENTATIONS:
-        if turn(stored).shape == upright.shape and np.array_equal(turn(stored), upright):
+        if np.array_equal(turn(stored), upright):  # False on other shapes
             return np.stack(stored_xy(*points.T, w, h), 1)
     raise ImageError(f"{path}: its upright image is no turn of its stored pixels (EXIF orientation)")
 
@@ -251,8 +251,7 @@ def export_run(run: str | os.PathLike, image_dir: str | os.PathLike, output: str
     names = sorted({name for pair in pairs for name in (pair.name0, pair.name1)})
     missing = [name for name in names if not (Path(image_dir) / name).is_file()]
     if missing:
-        raise ImageError(f"{len(missing)} image(s) of the run not found in {image_dir}: {', '.join(missing[:5])}"
-                         + (f" and {len(missing) - 5} more" if len(missing) > 5 else ""))
+        raise ImageError(f"{len(missing)} image(s) of the run not found in {image_dir}: {some_of(missing, 5)}")
     keypoints, matches = merge_keypoints(pairs, merge_radius)
     logger.info("COLMAP export: %d images, %d keypoints, %d one-to-one matches in %d pairs", len(keypoints),
                 sum(len(k) for k in keypoints.values()), sum(len(m) for m in matches), len(pairs))

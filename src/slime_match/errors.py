@@ -17,6 +17,12 @@ class ConfigError(SlimeMatchError, ValueError):
     """An unknown method/option name or an invalid parameter value."""
 
 
+def some_of(names: list[str], shown: int) -> str:
+    """The first ``shown`` names for an error message, then how many more: "a, b, c and 4 more"."""
+    rest = len(names) - shown
+    return ", ".join(names[:shown]) + (f" and {rest} more" if rest > 0 else "")
+
+
 def caused_by_interrupt(error: BaseException) -> bool:
     """Whether a KeyboardInterrupt is among the causes of ``error``: numba re-raises a Ctrl-C that arrives
     inside compiled code as a SystemError whose context is the KeyboardInterrupt."""

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 import torch
 
-from .errors import ImageError, SlimeMatchError
+from .errors import ImageError, SlimeMatchError, some_of
 
 MIN_IMAGE_SIDE = 32
 
@@ -149,8 +149,7 @@ def load_npz(path: str | os.PathLike, what: str, required: tuple[str, ...] = (),
             missing = [name for name in required if name not in arrays]
             if not missing:
                 return arrays
-            shown = ", ".join(missing[:3]) + (f" and {len(missing) - 3} more" if len(missing) > 3 else "")
-            problem = f"not a {what}: it has no {shown}"
+            problem = f"not a {what}: it has no {some_of(missing, 3)}"
     raise SlimeMatchError(f"{path}: {problem}{hint}")
 
 
