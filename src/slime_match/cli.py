@@ -1,5 +1,5 @@
-"""Command line: ``slime match``, ``slime pairs``, ``slime demo``, ``slime viz``, ``slime colmap`` (and
-``slime bench`` from slime_match.eval)."""
+"""Command line: ``slime match``, ``slime pairs``, ``slime make-pairs``, ``slime demo``, ``slime viz``,
+``slime colmap`` (and ``slime bench`` from slime_match.eval)."""
 
 from __future__ import annotations
 
@@ -135,6 +135,25 @@ def cmd_pairs(args: argparse.Namespace) -> int:
     return 1 if count["failed"] else 0
 
 
+def cmd_make_pairs(args: argparse.Namespace) -> int:
+    from .pair_lists import make_pairs, write_pairs
+
+    path = Path(args.pairs_file)
+    _check_output_folder(str(path.parent))
+    if path.is_dir():
+        raise ConfigError(f"{path} is a folder; -o names the pairs file to write")
+    if path.exists() and not args.overwrite:
+        raise ConfigError(f"{path} exists; pass --overwrite to replace it")
+    mode = "exhaustive" if args.sequential is None else "sequential"
+    pairs = make_pairs(args.images, mode, window=args.sequential or 1)
+    images = len({name for pair in pairs for name in pair})
+    how = "every pair" if mode == "exhaustive" else f"each image and the next {args.sequential} by name"
+    what = f"{len(pairs)} pairs of {images} images ({how})"
+    write_pairs(path, pairs, comment=f"slime make-pairs: {what} under {args.images}")
+    print(f"{what} -> {path}")
+    return 0
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     """Match scikit-image's Middlebury motorcycle stereo pair and score it with its disparity map."""
     import numpy as np
@@ -232,6 +251,16 @@ def build_parser() -> argparse.ArgumentParser:
     pairs.add_argument("--plot", action="store_true", help="also draw each pair's matches.png")
     _add_match_options(pairs)
     pairs.set_defaults(func=cmd_pairs)
+
+    make = sub.add_parser("make-pairs", help="write a pairs file for `slime pairs` from an image folder (every "
+                                             "pair, or each image with the next N)")
+    make.add_argument("images", help="image folder, sub-folders included (names are written relative to it)")
+    make.add_argument("-o", "--output", dest="pairs_file", required=True, help="the pairs file to write")
+    make.add_argument("--sequential", type=positive_int, default=None, metavar="N",
+                      help="pair each image with the N after it in name order (video frames) instead of every "
+                           "pair (N (N - 1) / 2 of N images)")
+    make.add_argument("--overwrite", action="store_true", help="replace an existing pairs file")
+    make.set_defaults(func=cmd_make_pairs)
 
     demo = sub.add_parser("demo", help="match a bundled real stereo pair (Middlebury motorcycle) and score it")
     demo.add_argument("-o", "--output", default="slime_demo", help="output folder (default slime_demo/)")

@@ -17,6 +17,7 @@ import torch
 from .errors import ImageError, SlimeMatchError, some_of
 
 MIN_IMAGE_SIDE = 32
+IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".bmp", ".tif", ".tiff", ".webp")  # image file suffixes
 
 ImageLike = str | os.PathLike | np.ndarray | torch.Tensor
 
@@ -202,6 +203,11 @@ def save_json(path: str | os.PathLike, obj: Any) -> None:
             handle.write("\n")
 
     _atomic_write(Path(path), write)
+
+
+def save_text(path: str | os.PathLike, text: str) -> None:
+    """Save a text file (UTF-8) atomically."""
+    _atomic_write(Path(path), lambda tmp: Path(tmp).write_text(text, encoding="utf-8"))
 
 
 def save_figure(path: str | os.PathLike, figure) -> None:

@@ -24,12 +24,12 @@ import numpy as np
 import scipy.linalg
 
 from slime_match.errors import ConfigError
+from slime_match.io import IMAGE_EXTS
 from slime_match.resize import to_original_matrix
 
 logger = logging.getLogger("slime_match")
 
 KINDS = ("homography", "fundamental", "pose", "disparity")
-IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".bmp", ".tif", ".tiff", ".webp")
 MEGADEPTH_MAX_SIDE = 1200
 SCANNET_SIZE = (640, 480)
 

@@ -30,7 +30,7 @@ from slime_match.eval import metrics as M
 from slime_match.eval.code_version import UNKNOWN
 from slime_match.eval.methods import method_title
 from slime_match.geometry.homography import project
-from slime_match.io import _atomic_write, save_figure
+from slime_match.io import save_figure, save_text
 
 GROUPS = ("planar", "non-planar")
 ROTATION_GROUPS = {"planar original": True, "planar rotated": False}  # subgroup -> pairs' "upright" flag
@@ -388,18 +388,14 @@ def write_pair_maps(folder: Path, images, gt, extras: dict[str, Any], t: float) 
 # outputs
 
 
-def _atomic_text(path: Path, text: str) -> None:
-    _atomic_write(path, lambda tmp: Path(tmp).write_text(text))
-
-
 def write_report(results: str | Path, summary: dict[str, Any] | None = None) -> dict[str, Any]:
     """Write ``table.md``, ``table.csv`` and ``bar_<metric>.png`` of a results folder (from its
     ``metrics.json`` when ``summary`` is None); returns the aggregate."""
     results = Path(results)
     summary = json.loads(json.dumps(summary)) if summary is not None else load_summary(results)
     agg = aggregate(summary)
-    _atomic_text(results / "table.md", markdown_tables(summary, agg))
-    _atomic_text(results / "table.csv", csv_table(summary, agg))
+    save_text(results / "table.md", markdown_tables(summary, agg))
+    save_text(results / "table.csv", csv_table(summary, agg))
     bar_charts(summary, agg, results)
     return agg
 
@@ -428,7 +424,7 @@ def write_results_doc(results: str | Path, doc: str | Path, command: str) -> Non
         markdown_tables(summary, agg),
     ]
     text = "\n".join(lines)
-    _atomic_text(Path(doc), text)
+    save_text(Path(doc), text)
 
 
 def main(argv: list[str] | None = None) -> int:
