@@ -9,17 +9,11 @@ import pytest
 from conftest import DATA, require, run_cli
 
 from slime_match.batch import match_pairs, read_pairs
-from slime_match.colmap import (
-    PairMatches,
-    export_run,
-    merge_keypoints,
-    read_run,
-    to_stored_frame,
-    write_database,
-)
+from slime_match.colmap import export_run, to_stored_frame, write_database
 from slime_match.config import make_config
 from slime_match.errors import ConfigError, ImageError, SlimeMatchError
 from slime_match.io import load_image, save_json, save_npz
+from slime_match.run_export import PairMatches, merge_keypoints, read_run
 
 SACRE_COEUR = DATA / "sacre_coeur"
 # three views with enough baseline for COLMAP's initial pair (the strongest-matched triples are too close)

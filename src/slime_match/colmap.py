@@ -1,25 +1,18 @@
 """A ``slime pairs`` run as a COLMAP database, and optionally its sparse reconstruction (``slime colmap``).
 
-Slime matches each pair on its own: one image's keypoints differ from pair to pair, and within a pair a
-keypoint may take part in several matches (Slime keeps duplicated keypoints of overlapping blocks). COLMAP
-wants one keypoint list per image and one-to-one matches per pair. So, per image, every keypoint of every
-pair it is in is pooled, exact duplicates merged, and the rest clustered greedily around the best-scored
-ones within ``merge_radius`` px (``slime.clusters.greedy_clusters``): each cluster becomes one COLMAP
-keypoint at its representative's position. Per pair, the matches then map to keypoint pairs, of which a
-one-to-one subset is kept by score (``matching.nn_kernels.greedy_accept``). COLMAP's own geometric
-verification and incremental mapper (pycolmap, an optional dependency) do the rest.
+The run's keypoints are merged into one list per image with one-to-one matches (``run_export``); COLMAP's
+own geometric verification and incremental mapper (pycolmap, an optional dependency) do the rest.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import shutil
 import sys
-import tempfile
 import time
-from dataclasses import dataclass
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -27,12 +20,17 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .batch import INDEX_FILE
-from .errors import ConfigError, ImageError, SlimeMatchError, some_of
-from .io import load_npz, save_json
-from .matching.nn_kernels import greedy_accept
-from .outputs import MATCHES_FILE, SUMMARY_FILE
-from .slime.clusters import greedy_clusters
+from .errors import ConfigError, ImageError, SlimeMatchError
+from .io import save_json
+from .outputs import SUMMARY_FILE
+from .run_export import (
+    PairMatches,
+    check_export_folder,
+    check_images,
+    merge_keypoints,
+    read_run,
+    staged_folder,
+)
 
 logger = logging.getLogger("slime_match")
 
@@ -40,100 +38,6 @@ DATABASE_FILE = "database.db"
 VERIFIED_PAIRS_FILE = "pairs.txt"
 SPARSE_FOLDER = "sparse"
 CAMERA_MODES = ("auto", "single", "per-folder", "per-image")
-
-
-@dataclass
-class PairMatches:
-    """The matches of one pair of a run.
-
-    Attributes:
-        name0, name1: image names (relative to the image folder).
-        keypoints0, keypoints1: (K, 2) float64 positions in pixels, top-left pixel centre = (0, 0).
-        scores: (K,) dissimilarities, lower is better.
-    """
-
-    name0: str
-    name1: str
-    keypoints0: np.ndarray
-    keypoints1: np.ndarray
-    scores: np.ndarray
-
-
-def read_run(run: str | os.PathLike, inliers_only: bool = False) -> list[PairMatches]:
-    """The finished pairs of a ``slime pairs`` run folder, in its index's order.
-
-    Args:
-        run: the run folder (holds ``pairs.json``).
-        inliers_only: keep only the matches the run's RANSAC accepted (the run must have used ``--ransac``).
-
-    Raises:
-        SlimeMatchError: no ``pairs.json``, no finished pair, or (``inliers_only``) a pair without inliers.
-    """
-    run = Path(run)
-    try:
-        records = json.loads((run / INDEX_FILE).read_text())["pairs"]
-    except (OSError, ValueError, KeyError, TypeError) as error:
-        raise SlimeMatchError(f"{run} is not a `slime pairs` run folder (cannot read its {INDEX_FILE}: "
-                              f"{error})") from None
-    pairs = []
-    for record in records:
-        if record.get("status") not in ("done", "skipped"):
-            continue
-        required = ("keypoints0", "keypoints1", "scores") + (("inliers",) if inliers_only else ())
-        hint = "match the pairs with --ransac to use --inliers-only" if inliers_only else ""
-        arrays = load_npz(run / record["folder"] / MATCHES_FILE, "matches file", required, hint)
-        keep = arrays["inliers"].astype(bool) if inliers_only else slice(None)
-        pairs.append(PairMatches(record["image0"], record["image1"], arrays["keypoints0"][keep],
-                                 arrays["keypoints1"][keep], arrays["scores"][keep]))
-    if not pairs:
-        raise SlimeMatchError(f"{run} has no finished pair ({INDEX_FILE} lists {len(records)} pairs)")
-    return pairs
-
-
-def merge_keypoints(pairs: list[PairMatches], merge_radius: float = 1.0
-                    ) -> tuple[dict[str, np.ndarray], list[np.ndarray]]:
-    """One keypoint list per image and one-to-one matches per pair.
-
-    Args:
-        pairs: the matches of each pair.
-        merge_radius: keypoints of one image within this distance (px, in both coordinates) of a
-            better-scored one become one with it; 0 merges only identical positions.
-
-    Returns:
-        keypoints: per image name, (N, 2) float64 positions (px), best-scored first.
-        matches: per pair, (M, 2) int64 indices into its two images' keypoints, one-to-one, best first.
-    """
-    if not merge_radius >= 0:  # NaN too
-        raise ConfigError(f"merge_radius must be >= 0 px, got {merge_radius}")
-    pooled: dict[str, list[tuple[int, int]]] = {}  # image -> (pair, side) in pooling order
-    for p, pair in enumerate(pairs):
-        pooled.setdefault(pair.name0, []).append((p, 0))
-        pooled.setdefault(pair.name1, []).append((p, 1))
-    keypoints: dict[str, np.ndarray] = {}
-    index_of: dict[tuple[int, int], np.ndarray] = {}
-    for name, members in pooled.items():
-        points = np.concatenate([_side(pairs[p], s) for p, s in members]).astype(np.float64)
-        scores = np.concatenate([pairs[p].scores for p, _ in members]).astype(np.float64)
-        unique, inverse = np.unique(points, axis=0, return_inverse=True)
-        best = np.full(len(unique), np.inf)
-        np.minimum.at(best, inverse.reshape(-1), scores)
-        reps, cluster = greedy_clusters(unique, best, merge_radius)
-        keypoints[name] = unique[reps]
-        ids = cluster[inverse.reshape(-1)]
-        bounds = np.cumsum([0] + [len(pairs[p].scores) for p, _ in members])
-        for (p, s), start, stop in zip(members, bounds[:-1], bounds[1:]):
-            index_of[p, s] = ids[start:stop]
-    matches = []
-    for p, pair in enumerate(pairs):
-        ids = np.stack([index_of[p, 0], index_of[p, 1]], 1)
-        order = np.argsort(pair.scores, kind="stable")
-        accepted = greedy_accept(ids[:, 0], ids[:, 1], order, 1) if len(ids) else np.zeros(0, bool)
-        matches.append(ids[order[accepted[order]]])
-    return keypoints, matches
-
-
-def _side(pair: PairMatches, side: int) -> np.ndarray:
-    return pair.keypoints0 if side == 0 else pair.keypoints1
 
 
 # The eight ways a file's EXIF orientation turns its stored pixels (raw, h x w) into the upright image:
@@ -245,23 +149,14 @@ def export_run(run: str | os.PathLike, image_dir: str | os.PathLike, output: str
     if threads < 1:
         raise ConfigError(f"threads must be >= 1, got {threads}")
     out = Path(output)
-    _check_output(out, overwrite)
+    check_export_folder(out, DATABASE_FILE, "COLMAP", overwrite)
     start = time.perf_counter()
     pairs = read_run(run, inliers_only)
-    names = sorted({name for pair in pairs for name in (pair.name0, pair.name1)})
-    missing = [name for name in names if not (Path(image_dir) / name).is_file()]
-    if missing:
-        raise ImageError(f"{len(missing)} image(s) of the run not found in {image_dir}: {some_of(missing, 5)}")
+    check_images(pairs, image_dir)
     keypoints, matches = merge_keypoints(pairs, merge_radius)
     logger.info("COLMAP export: %d images, %d keypoints, %d one-to-one matches in %d pairs", len(keypoints),
                 sum(len(k) for k in keypoints.values()), sum(len(m) for m in matches), len(pairs))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}-staging-"))
-    quiet = logger.getEffectiveLevel() > logging.INFO
-    log_level = pycolmap.logging.minloglevel
-    try:
-        if quiet:
-            pycolmap.logging.minloglevel = 2  # COLMAP's errors only: its info lines run to thousands
+    with _colmap_logs(pycolmap, shown=logger.getEffectiveLevel() <= logging.INFO), staged_folder(out) as staging:
         database = staging / DATABASE_FILE
         write_database(database, image_dir, keypoints, pairs, matches, camera_mode)
         pairs_file = staging / VERIFIED_PAIRS_FILE
@@ -283,26 +178,19 @@ def export_run(run: str | os.PathLike, image_dir: str | os.PathLike, output: str
                                             threads)
         summary["seconds"] = round(time.perf_counter() - start, 2)
         save_json(staging / SUMMARY_FILE, summary)
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(staging, out)
-    finally:
-        pycolmap.logging.minloglevel = log_level
-        shutil.rmtree(staging, ignore_errors=True)
     return summary
 
 
-def _check_output(out: Path, overwrite: bool) -> None:
-    """Refuse an output folder that is a file or is not empty, unless ``overwrite`` and it holds an earlier
-    export."""
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"output folder {out} is a file, not a folder: choose another output folder")
-    if not out.is_dir() or not any(out.iterdir()):
-        return
-    if not (out / DATABASE_FILE).is_file():
-        raise ConfigError(f"{out} is not empty and holds no COLMAP export: choose another output folder")
-    if not overwrite:
-        raise ConfigError(f"{out} holds an earlier COLMAP export: use --overwrite to replace it")
+@contextmanager
+def _colmap_logs(pycolmap, shown: bool) -> Iterator[None]:
+    """COLMAP's info log on (``shown``) or off (its errors only: its info lines run to thousands) in the block."""
+    level = pycolmap.logging.minloglevel
+    if not shown:
+        pycolmap.logging.minloglevel = 2
+    try:
+        yield
+    finally:
+        pycolmap.logging.minloglevel = level
 
 
 def _reconstruct(pycolmap, database: Path, image_dir: Path, sparse: Path, seed: int, threads: int
