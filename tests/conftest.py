@@ -4,12 +4,15 @@ import os
 from pathlib import Path
 
 import cv2
+import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
 from skimage.data import stereo_motorcycle
 
 from slime_match.cli import main
+from slime_match.io import save_json, save_npz
+from slime_match.run_export import PairMatches
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = (ROOT.parent / "shared").resolve()
@@ -59,3 +62,43 @@ def random_patches(n: int, seed: int = 0) -> torch.Tensor:
     x[: n // 2] = F.avg_pool2d(torch.rand(n // 2, 1, 40, 40, generator=g), 9, 1)
     x[:3] = 0.4
     return x
+
+
+def export_pairs() -> list[PairMatches]:
+    """The matches of a run, for the SfM exports: two pairs sharing image a, with duplicates, a near-duplicate
+    0.4 px away and a repeated keypoint pair."""
+    ab = PairMatches("a.png", "b.png",
+                     np.array([[10, 10], [10, 10], [10.4, 10.3], [50, 50]], float),
+                     np.array([[20, 20], [30, 30], [20, 20], [60, 60]], float),
+                     np.array([0.1, 0.2, 0.05, 0.3]))
+    ac = PairMatches("a.png", "c.png", np.array([[50.5, 50], [5, 5]], float), np.array([[7, 7], [9, 9]], float),
+                     np.array([0.4, 0.2]))
+    return [ab, ac]
+
+
+def write_run_folder(tmp_path, pairs: list[PairMatches], inliers: bool = False):
+    """A run folder as `slime pairs` writes it, holding ``pairs``."""
+    run = tmp_path / "run"
+    records = []
+    for pair in pairs:
+        folder = f"{pair.name0}__{pair.name1}"
+        arrays = {"keypoints0": pair.keypoints0, "keypoints1": pair.keypoints1, "scores": pair.scores}
+        if inliers:
+            arrays["inliers"] = pair.scores < 0.25
+        (run / folder).mkdir(parents=True)
+        save_npz(run / folder / "matches.npz", **arrays)
+        records.append({"image0": pair.name0, "image1": pair.name1, "folder": folder, "status": "done"})
+    records.append({"image0": "a.png", "image1": "x.png", "folder": "a.png__x.png", "status": "failed"})
+    save_json(run / "pairs.json", {"pairs": records, "finished": True})
+    return run
+
+
+@pytest.fixture
+def small_images(tmp_path):
+    """Three random 64x48 images a.png, b.png, c.png (the images of :func:`export_pairs`)."""
+    folder = tmp_path / "images"
+    folder.mkdir()
+    g = np.random.default_rng(0)
+    for name in ("a.png", "b.png", "c.png"):
+        cv2.imwrite(str(folder / name), g.integers(0, 255, (48, 64, 3), dtype=np.uint8))
+    return folder

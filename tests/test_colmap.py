@@ -6,74 +6,18 @@ import shutil
 import cv2
 import numpy as np
 import pytest
-from conftest import DATA, require, run_cli
+from conftest import DATA, export_pairs, require, run_cli, write_run_folder
 
 from slime_match.batch import match_pairs, read_pairs
 from slime_match.colmap import export_run, to_stored_frame, write_database
 from slime_match.config import make_config
-from slime_match.errors import ConfigError, ImageError, SlimeMatchError
-from slime_match.io import load_image, save_json, save_npz
-from slime_match.run_export import PairMatches, merge_keypoints, read_run
+from slime_match.errors import ConfigError, ImageError
+from slime_match.io import load_image
+from slime_match.run_export import PairMatches, merge_keypoints
 
 SACRE_COEUR = DATA / "sacre_coeur"
 # three views with enough baseline for COLMAP's initial pair (the strongest-matched triples are too close)
 TRIPLE = ("03903474_1471484089.jpg", "10265353_3838484249.jpg", "32809961_8274055477.jpg")
-
-
-def _pairs() -> list[PairMatches]:
-    """Two pairs sharing image a: duplicates, a near-duplicate 0.4 px away and a repeated keypoint pair."""
-    ab = PairMatches("a.png", "b.png",
-                     np.array([[10, 10], [10, 10], [10.4, 10.3], [50, 50]], float),
-                     np.array([[20, 20], [30, 30], [20, 20], [60, 60]], float),
-                     np.array([0.1, 0.2, 0.05, 0.3]))
-    ac = PairMatches("a.png", "c.png", np.array([[50.5, 50], [5, 5]], float), np.array([[7, 7], [9, 9]], float),
-                     np.array([0.4, 0.2]))
-    return [ab, ac]
-
-
-def test_merge_keypoints_exact():
-    keypoints, matches = merge_keypoints(_pairs(), merge_radius=1.0)
-    # image a: (10.4, 10.3) (score 0.05) absorbs (10, 10); (5, 5) (0.2) and (50, 50) (0.3) absorb (50.5, 50)
-    np.testing.assert_array_equal(keypoints["a.png"], [[10.4, 10.3], [5, 5], [50, 50]])
-    np.testing.assert_array_equal(keypoints["b.png"], [[20, 20], [30, 30], [60, 60]])
-    np.testing.assert_array_equal(keypoints["c.png"], [[9, 9], [7, 7]])
-    # a-b by score: (a0, b0) at 0.05; 0.1 repeats it, 0.2 reuses a0; (a2, b2) at 0.3
-    np.testing.assert_array_equal(matches[0], [[0, 0], [2, 2]])
-    np.testing.assert_array_equal(matches[1], [[1, 0], [2, 1]])
-
-
-def test_merge_radius_zero_merges_only_identical_positions():
-    keypoints, matches = merge_keypoints(_pairs(), merge_radius=0)
-    assert len(keypoints["a.png"]) == 5  # (10, 10) once, (10.4, 10.3), (50, 50), (50.5, 50), (5, 5)
-    assert len(matches[0]) == 3  # (10, 10) and (10.4, 10.3) are now two keypoints: one more match
-    for pair_matches in matches:
-        assert len(np.unique(pair_matches[:, 0])) == len(np.unique(pair_matches[:, 1])) == len(pair_matches)
-
-
-def test_merge_keypoints_empty_pair_and_bad_radius():
-    empty = PairMatches("a.png", "d.png", np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
-    keypoints, matches = merge_keypoints([*_pairs(), empty])
-    assert keypoints["d.png"].shape == (0, 2) and matches[2].shape == (0, 2)
-    for bad in (-1, float("nan")):
-        with pytest.raises(ConfigError, match="merge_radius"):
-            merge_keypoints(_pairs(), merge_radius=bad)
-
-
-def _run_folder(tmp_path, pairs: list[PairMatches], inliers: bool = False):
-    """A run folder as `slime pairs` writes it, holding ``pairs``."""
-    run = tmp_path / "run"
-    records = []
-    for pair in pairs:
-        folder = f"{pair.name0}__{pair.name1}"
-        arrays = {"keypoints0": pair.keypoints0, "keypoints1": pair.keypoints1, "scores": pair.scores}
-        if inliers:
-            arrays["inliers"] = pair.scores < 0.25
-        (run / folder).mkdir(parents=True)
-        save_npz(run / folder / "matches.npz", **arrays)
-        records.append({"image0": pair.name0, "image1": pair.name1, "folder": folder, "status": "done"})
-    records.append({"image0": "a.png", "image1": "x.png", "folder": "a.png__x.png", "status": "failed"})
-    save_json(run / "pairs.json", {"pairs": records, "finished": True})
-    return run
 
 
 @pytest.mark.parametrize("orientation", range(1, 9))
@@ -94,33 +38,10 @@ def test_keypoints_go_to_the_stored_frame_of_exif_turned_files(tmp_path, orienta
     np.testing.assert_allclose(upright[ys.ravel(), xs.ravel()] * 255, stored[sy, sx], atol=0.01)
 
 
-def test_read_run(tmp_path):
-    pairs = read_run(_run_folder(tmp_path, _pairs(), inliers=True), inliers_only=True)
-    assert [(p.name0, p.name1) for p in pairs] == [("a.png", "b.png"), ("a.png", "c.png")]  # not the failed one
-    np.testing.assert_array_equal(pairs[0].scores, [0.1, 0.2, 0.05])
-    with pytest.raises(SlimeMatchError, match="--ransac"):
-        read_run(_run_folder(tmp_path / "plain", _pairs()), inliers_only=True)
-    with pytest.raises(SlimeMatchError, match="not a `slime pairs` run folder"):
-        read_run(tmp_path / "nowhere")
-    save_json(tmp_path / "failed" / "pairs.json", {"pairs": [{"status": "failed"}]})
-    with pytest.raises(SlimeMatchError, match="no finished pair"):
-        read_run(tmp_path / "failed")
-
-
-@pytest.fixture
-def small_images(tmp_path):
-    folder = tmp_path / "images"
-    folder.mkdir()
-    g = np.random.default_rng(0)
-    for name in ("a.png", "b.png", "c.png"):
-        cv2.imwrite(str(folder / name), g.integers(0, 255, (48, 64, 3), dtype=np.uint8))
-    return folder
-
-
 def test_write_database_round_trip(tmp_path, small_images):
     pycolmap = pytest.importorskip("pycolmap")
-    pairs = _pairs()
-    keypoints, matches = merge_keypoints(pairs)
+    pairs = export_pairs()
+    keypoints, matches, _ = merge_keypoints(pairs)
     write_database(tmp_path / "db.db", small_images, keypoints, pairs, matches, camera_mode="single")
     with pycolmap.Database.open(tmp_path / "db.db") as db:
         ids = {image.name: image.image_id for image in db.read_all_images()}
@@ -135,7 +56,7 @@ def test_write_database_round_trip(tmp_path, small_images):
 def test_export_without_reconstruction_and_an_image_without_matches(tmp_path, small_images):
     pytest.importorskip("pycolmap")
     empty = PairMatches("b.png", "c.png", np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
-    run = _run_folder(tmp_path, [_pairs()[0], empty])  # c.png takes part in no match
+    run = write_run_folder(tmp_path, [export_pairs()[0], empty])  # c.png takes part in no match
     summary = export_run(run, small_images, tmp_path / "out", reconstruct=False)
     assert (summary["images"], summary["pairs"], summary["keypoints"], summary["matches"]) == (3, 2, 5, 2)
     assert "models" not in summary and json.loads((tmp_path / "out" / "summary.json").read_text()) == summary
@@ -145,7 +66,7 @@ def test_export_without_reconstruction_and_an_image_without_matches(tmp_path, sm
 
 def test_export_refuses_bad_output_and_missing_images(tmp_path, small_images):
     pytest.importorskip("pycolmap")
-    run = _run_folder(tmp_path, _pairs())
+    run = write_run_folder(tmp_path, export_pairs())
     (tmp_path / "busy").mkdir()
     (tmp_path / "busy" / "notes.txt").write_text("mine")
     with pytest.raises(ConfigError, match="holds no COLMAP export"):
@@ -165,7 +86,7 @@ def test_export_refuses_bad_output_and_missing_images(tmp_path, small_images):
 def test_missing_pycolmap_is_a_clear_error(tmp_path, small_images, monkeypatch):
     monkeypatch.setitem(__import__("sys").modules, "pycolmap", None)  # `import pycolmap` raises ImportError
     with pytest.raises(ConfigError, match="pip install 'slime-match\\[colmap\\]'"):
-        export_run(_run_folder(tmp_path, _pairs()), small_images, tmp_path / "out")
+        export_run(write_run_folder(tmp_path, export_pairs()), small_images, tmp_path / "out")
 
 
 @pytest.fixture(scope="module")

@@ -153,7 +153,7 @@ def export_run(run: str | os.PathLike, image_dir: str | os.PathLike, output: str
     start = time.perf_counter()
     pairs = read_run(run, inliers_only)
     check_images(pairs, image_dir)
-    keypoints, matches = merge_keypoints(pairs, merge_radius)
+    keypoints, matches, _ = merge_keypoints(pairs, merge_radius)
     logger.info("COLMAP export: %d images, %d keypoints, %d one-to-one matches in %d pairs", len(keypoints),
                 sum(len(k) for k in keypoints.values()), sum(len(m) for m in matches), len(pairs))
     with _colmap_logs(pycolmap, shown=logger.getEffectiveLevel() <= logging.INFO), staged_folder(out) as staging:

@@ -79,7 +79,7 @@ def read_run(run: str | os.PathLike, inliers_only: bool = False) -> list[PairMat
 
 
 def merge_keypoints(pairs: list[PairMatches], merge_radius: float = 1.0
-                    ) -> tuple[dict[str, np.ndarray], list[np.ndarray]]:
+                    ) -> tuple[dict[str, np.ndarray], list[np.ndarray], list[np.ndarray]]:
     """One keypoint list per image and one-to-one matches per pair.
 
     Args:
@@ -90,6 +90,7 @@ def merge_keypoints(pairs: list[PairMatches], merge_radius: float = 1.0
     Returns:
         keypoints: per image name, (N, 2) float64 positions (px), best-scored first.
         matches: per pair, (M, 2) int64 indices into its two images' keypoints, one-to-one, best first.
+        scores: per pair, (M,) float64 dissimilarities of those matches (the run's, lower is better).
     """
     if not merge_radius >= 0:  # NaN too
         raise ConfigError(f"merge_radius must be >= 0 px, got {merge_radius}")
@@ -111,13 +112,15 @@ def merge_keypoints(pairs: list[PairMatches], merge_radius: float = 1.0
         bounds = np.cumsum([0] + [len(pairs[p].scores) for p, _ in members])
         for (p, s), start, stop in zip(members, bounds[:-1], bounds[1:]):
             index_of[p, s] = ids[start:stop]
-    matches = []
+    matches, match_scores = [], []
     for p, pair in enumerate(pairs):
         ids = np.stack([index_of[p, 0], index_of[p, 1]], 1)
         order = np.argsort(pair.scores, kind="stable")
         accepted = greedy_accept(ids[:, 0], ids[:, 1], order, 1) if len(ids) else np.zeros(0, bool)
-        matches.append(ids[order[accepted[order]]])
-    return keypoints, matches
+        kept = order[accepted[order]]
+        matches.append(ids[kept])
+        match_scores.append(pair.scores[kept].astype(np.float64))
+    return keypoints, matches, match_scores
 
 
 def _side(pair: PairMatches, side: int) -> np.ndarray:
