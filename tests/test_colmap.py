@@ -59,6 +59,7 @@ def test_export_without_reconstruction_and_an_image_without_matches(tmp_path, sm
     run = write_run_folder(tmp_path, [export_pairs()[0], empty])  # c.png takes part in no match
     summary = export_run(run, small_images, tmp_path / "out", reconstruct=False)
     assert (summary["images"], summary["pairs"], summary["keypoints"], summary["matches"]) == (3, 2, 5, 2)
+    assert summary["verified_pairs"] == 0  # two matches give no two-view geometry (COLMAP lists it as degenerate)
     assert "models" not in summary and json.loads((tmp_path / "out" / "summary.json").read_text()) == summary
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["database.db", "pairs.txt", "summary.json"]
     assert [p.name for p in tmp_path.iterdir() if "staging" in p.name] == []

@@ -140,7 +140,8 @@ def export_run(run: str | os.PathLike, image_dir: str | os.PathLike, output: str
             otherwise).
 
     Returns:
-        The summary (also ``summary.json``): keypoints and matches kept, verified pairs and, per model,
+        The summary (also ``summary.json``): keypoints and matches kept, verified pairs (with a two-view
+        geometry of at least one inlier; COLMAP drops the raw matches of the others) and, per model,
         registered images, 3D points, mean track length and mean reprojection error (px).
     """
     pycolmap = _pycolmap()
@@ -165,7 +166,8 @@ def export_run(run: str | os.PathLike, image_dir: str | os.PathLike, output: str
         verification.ransac.random_seed = seed
         pycolmap.verify_matches(database, pairs_file, verification)
         with pycolmap.Database.open(database) as db:
-            verified = db.num_verified_image_pairs()
+            # num_verified_image_pairs() also counts the pairs that verification rejected (no inlier)
+            verified = sum(count > 0 for count in db.read_two_view_geometry_num_inliers()[1])
         logger.info("COLMAP export: %d of %d pairs verified", verified, len(pairs))
         summary: dict[str, Any] = {
             "run": str(run), "images": len(keypoints), "pairs": len(pairs), "verified_pairs": verified,
