@@ -11,7 +11,7 @@ import torch
 from PIL import Image, ImageOps
 
 from slime_match.errors import ImageError
-from slime_match.io import load_image, save_json, save_npz
+from slime_match.io import image_size, load_image, save_json, save_npz
 
 
 def _gradient(h=40, w=50):
@@ -60,6 +60,14 @@ def test_exif_orientation_is_applied(tmp_path, orientation):
     loaded = load_image(path)
     assert loaded.shape == expected.shape
     assert np.array_equal(loaded, expected)
+    assert image_size(path) == (loaded.shape[1], loaded.shape[0])  # (width, height), upright too
+
+
+def test_image_size_of_bad_files(tmp_path):
+    (tmp_path / "broken.png").write_bytes(b"not an image")
+    for path, message in ((tmp_path / "broken.png", "not a readable image"), (tmp_path / "none.png", "no such")):
+        with pytest.raises(ImageError, match=message):
+            image_size(path)
 
 
 def test_tensor_inputs():

@@ -1,5 +1,8 @@
 """Reading a `slime pairs` run, merging its keypoints per image with one-to-one matches, staging exports."""
 
+import os
+import stat
+
 import numpy as np
 import pytest
 from conftest import export_pairs, write_run_folder
@@ -95,4 +98,11 @@ def test_staged_folder_is_all_or_nothing(tmp_path):
         assert not (out / "new.txt").exists()
     assert [p.name for p in out.iterdir()] == ["new.txt"]
     assert [p.name for p in tmp_path.iterdir()] == ["out"]  # no staging folder left
+    previous = os.umask(0o022)
+    try:
+        with staged_folder(tmp_path / "fresh"):
+            pass
+    finally:
+        os.umask(previous)
+    assert stat.S_IMODE((tmp_path / "fresh").stat().st_mode) == 0o755  # a plain mkdir's, not mkdtemp's 0700
 

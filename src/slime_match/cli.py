@@ -1,5 +1,5 @@
 """Command line: ``slime match``, ``slime pairs``, ``slime make-pairs``, ``slime demo``, ``slime viz``,
-``slime colmap`` (and ``slime bench`` from slime_match.eval)."""
+``slime colmap``, ``slime hloc`` (and ``slime bench`` from slime_match.eval)."""
 
 from __future__ import annotations
 
@@ -223,6 +223,32 @@ def cmd_colmap(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_hloc(args: argparse.Namespace) -> int:
+    from .hloc import FEATURES_FILE, MATCHES_FILE, export_hloc
+
+    summary = export_hloc(args.run, args.images, args.output, merge_radius=args.merge_radius,
+                          inliers_only=args.inliers_only, overwrite=args.overwrite)
+    out = Path(args.output)
+    print(f"{summary['images']} images, {summary['keypoints']} keypoints, {summary['matches']} matches in "
+          f"{summary['pairs']} pairs -> {out / FEATURES_FILE}, {out / MATCHES_FILE}")
+    return 0
+
+
+def _add_export_options(parser: argparse.ArgumentParser, files: str, tool: str) -> None:
+    """The options that ``slime colmap`` and ``slime hloc`` share: the run, its images, the output folder and
+    how the run's keypoints are merged."""
+    parser.add_argument("run", help="run folder of `slime pairs`")
+    parser.add_argument("--images", default=".", help="the image folder of the run (default: the current folder)")
+    parser.add_argument("-o", "--output", required=True, help=f"output folder: {files}")
+    parser.add_argument("--merge-radius", type=float, default=1.0,
+                        help="px: keypoints of an image within this distance (in x and in y) become one "
+                             "(default 1; 0: only identical positions)")
+    parser.add_argument("--inliers-only", action="store_true",
+                        help="export only the run's RANSAC inliers (the run must have used --ransac)")
+    parser.add_argument("--overwrite", action="store_true", help=f"replace an earlier {tool} export in the output "
+                                                                  "folder")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="slime", description="Image matching by bare homography (Slime)")
     parser.add_argument("--debug", action="store_true", help="show tracebacks and debug logs")
@@ -280,16 +306,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     colmap = sub.add_parser("colmap", help="a `slime pairs` run as a COLMAP database and its sparse "
                                            "reconstruction (needs pycolmap)")
-    colmap.add_argument("run", help="run folder of `slime pairs`")
-    colmap.add_argument("--images", default=".", help="the image folder of the run (default: the current "
-                                                      "folder)")
-    colmap.add_argument("-o", "--output", required=True,
-                        help="output folder: database.db, pairs.txt, summary.json, sparse/N/ (COLMAP models)")
-    colmap.add_argument("--merge-radius", type=float, default=1.0,
-                        help="px: keypoints of an image within this distance (in x and in y) become one "
-                             "(default 1; 0: only identical positions)")
-    colmap.add_argument("--inliers-only", action="store_true",
-                        help="export only the run's RANSAC inliers (the run must have used --ransac)")
+    _add_export_options(colmap, "database.db, pairs.txt, summary.json, sparse/N/ (COLMAP models)", "COLMAP")
     colmap.add_argument("--camera-mode", choices=CAMERA_MODES, default="auto",
                         help="COLMAP's camera sharing among images (default auto)")
     colmap.add_argument("--no-reconstruct", action="store_true",
@@ -298,9 +315,13 @@ def build_parser() -> argparse.ArgumentParser:
     colmap.add_argument("--threads", type=positive_int, default=1,
                         help="COLMAP's mapping threads (default 1: the same models on every run; more is faster "
                              "on large runs but not reproducible)")
-    colmap.add_argument("--overwrite", action="store_true", help="replace an earlier export in the output folder")
     colmap.add_argument("-v", "--verbose", action="store_true", help="log each step and COLMAP's own output")
     colmap.set_defaults(func=cmd_colmap)
+
+    hloc = sub.add_parser("hloc", help="a `slime pairs` run as hloc's features.h5 and matches.h5 (needs h5py)")
+    _add_export_options(hloc, "features.h5, matches.h5, pairs.txt, summary.json", "hloc")
+    hloc.add_argument("-v", "--verbose", action="store_true", help="log what was written")
+    hloc.set_defaults(func=cmd_hloc)
 
     from .eval.bench import add_bench_parser
 

@@ -56,6 +56,16 @@ def load_image(source: ImageLike) -> np.ndarray:
     return image
 
 
+def image_size(path: str | os.PathLike) -> tuple[int, int]:
+    """(width, height) in px of an image file as :func:`load_image` gives it (upright by its EXIF orientation).
+
+    Raises:
+        ImageError: missing, unreadable or non-image file.
+    """
+    height, width = _read_file(Path(path)).shape[:2]
+    return width, height
+
+
 def _read_file(path: Path) -> np.ndarray:
     if not path.exists():
         raise ImageError(f"{path}: no such file")
@@ -163,7 +173,7 @@ def _atomic_write(path: Path, write) -> None:
     os.close(fd)
     try:
         write(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())
+        os.chmod(tmp, 0o666 & ~current_umask())
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -171,7 +181,7 @@ def _atomic_write(path: Path, write) -> None:
         raise
 
 
-def _umask() -> int:
+def current_umask() -> int:
     """The process umask, read from /proc where it can be (setting it to read it back races other threads)."""
     try:
         for line in Path("/proc/self/status").read_text().splitlines():

@@ -24,7 +24,7 @@ import numpy as np
 
 from .batch import INDEX_FILE
 from .errors import ConfigError, ImageError, SlimeMatchError, some_of
-from .io import load_npz
+from .io import current_umask, load_npz
 from .matching.nn_kernels import greedy_accept
 from .outputs import MATCHES_FILE
 from .slime.clusters import greedy_clusters
@@ -152,9 +152,10 @@ def check_export_folder(out: Path, marker: str, tool: str, overwrite: bool) -> N
 @contextmanager
 def staged_folder(out: Path) -> Iterator[Path]:
     """A fresh folder beside ``out`` to write an export into; it replaces ``out`` when the block ends without
-    an error, and is removed otherwise."""
+    an error, and is removed otherwise. The folder gets the permissions of a plain ``mkdir`` under the umask."""
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}-staging-"))
+    os.chmod(staging, 0o777 & ~current_umask())  # a plain mkdir's permissions (mkdtemp's are owner-only)
     try:
         yield staging
         if out.exists():
