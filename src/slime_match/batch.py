@@ -29,7 +29,7 @@ from .config import MatchConfig
 from .cpus import available_cpus
 from .errors import ConfigError, ImageError, some_of
 from .io import jsonable, load_image, save_json
-from .matcher import Matcher
+from .matcher import FEATURE_CACHE_MB, Matcher
 from .outputs import SUMMARY_FILE, is_complete, write_pair_outputs
 
 logger = logging.getLogger("slime_match")
@@ -104,7 +104,8 @@ def _slug(name: str) -> str:
 
 
 def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathLike, workers: int = 1,
-                overwrite: bool = False, plot: bool = False) -> list[dict[str, Any]]:
+                overwrite: bool = False, plot: bool = False, feature_cache_mb: float = FEATURE_CACHE_MB
+                ) -> list[dict[str, Any]]:
     """Match every pair into ``output/<folder>/``, skipping the pairs already finished there.
 
     Args:
@@ -114,6 +115,8 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
         workers: processes matching pairs at once; the CPU threads are split among them.
         overwrite: recompute finished pairs (and accept a run folder made with another configuration).
         plot: also draw each pair's matches.png.
+        feature_cache_mb: memory (MiB, shared by the workers) for the Slime features of recent images, reused
+            by later pairs with the same image (see :class:`Matcher`); 0 turns it off.
 
     Returns:
         One record per pair, in ``jobs`` order: names, folder, status ("done", "skipped" or "failed"),
@@ -125,7 +128,8 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
     if workers < 1:
         raise ConfigError(f"workers must be >= 1, got {workers}")
     out = Path(output)
-    matcher = Matcher(config)  # resolves "auto" choices and fails early on missing weights or a missing GPU
+    # resolves "auto" choices and fails early on missing weights or a missing GPU (and a bad cache budget)
+    matcher = Matcher(config, feature_cache_mb=feature_cache_mb)
     _claim_run_folder(out, matcher.config, overwrite)
     records: dict[int, dict[str, Any]] = {}
     todo = []
@@ -139,7 +143,7 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
     if workers == 1 or len(todo) <= 1:
         finished = ((index, _match_one(matcher, jobs[index], out, plot)) for index in todo)
     else:
-        finished = _match_in_pool(matcher, jobs, todo, out, plot, workers)
+        finished = _match_in_pool(matcher, jobs, todo, out, plot, workers, feature_cache_mb / workers)
     try:
         for index, record in finished:
             records[index] = record
@@ -211,10 +215,11 @@ def _match_one(matcher: Matcher, job: PairJob, out: Path, plot: bool) -> dict[st
     return _record(job, "done", len(result), result.summary["seconds"]["total"])
 
 
-def _match_in_pool(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool, workers: int
-                   ) -> Iterator[tuple[int, dict[str, Any]]]:
+def _match_in_pool(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool, workers: int,
+                   feature_cache_mb: float) -> Iterator[tuple[int, dict[str, Any]]]:
     """(index, record) of the ``todo`` pairs as they finish in ``workers`` spawned processes, each with a
-    Matcher of ``matcher``'s configuration and an equal share of the available CPUs (``available_cpus``:
+    Matcher of ``matcher``'s configuration (and a feature cache of ``feature_cache_mb``) and an equal share of
+    the available CPUs (``available_cpus``:
     torch threads and Slime's own forked workers). On an interruption the workers are stopped at once (a
     pair's files are written all or nothing)."""
     share = max(1, available_cpus() // workers)
@@ -222,7 +227,8 @@ def _match_in_pool(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: 
     if config.slime.workers is None:
         config.slime.workers = share
     tasks = [(index, jobs[index], out, plot) for index in todo]
-    pool = _ParentContext().Pool(workers, initializer=_init_worker, initargs=(config, share))
+    pool = _ParentContext().Pool(workers, initializer=_init_worker,
+                                  initargs=(config, share, feature_cache_mb))
     try:  # spawn, not fork: a forked copy of the parent's torch and OpenMP thread pools can deadlock
         yield from pool.imap_unordered(_match_in_worker, tasks)
         pool.close()
@@ -253,7 +259,7 @@ class _ParentContext(SpawnContext):
 _WORKER_MATCHER = None
 
 
-def _init_worker(config: MatchConfig, threads: int) -> None:
+def _init_worker(config: MatchConfig, threads: int, feature_cache_mb: float) -> None:
     import numba
     import torch
 
@@ -263,7 +269,7 @@ def _init_worker(config: MatchConfig, threads: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle: it stops the workers
     torch.set_num_threads(threads)
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-    _WORKER_MATCHER = Matcher(config)
+    _WORKER_MATCHER = Matcher(config, feature_cache_mb=feature_cache_mb)
 
 
 def _match_in_worker(task: tuple[int, PairJob, Path, bool]) -> tuple[int, dict[str, Any]]:

@@ -125,10 +125,12 @@ def cmd_match(args: argparse.Namespace) -> int:
 
 def cmd_pairs(args: argparse.Namespace) -> int:
     from .batch import INDEX_FILE, match_pairs, read_pairs
+    from .matcher import FEATURE_CACHE_MB
 
     jobs = read_pairs(args.pairs, args.images)  # a bad pairs file or a missing image fails before any work
+    cache_mb = FEATURE_CACHE_MB if args.feature_cache_mb is None else args.feature_cache_mb
     records = match_pairs(_config(args), jobs, args.output, workers=args.workers, overwrite=args.overwrite,
-                          plot=args.plot)
+                          plot=args.plot, feature_cache_mb=cache_mb)
     count = {status: sum(r["status"] == status for r in records) for status in ("done", "skipped", "failed")}
     print(f"{len(records)} pairs: {count['done']} matched, {count['skipped']} already done, "
           f"{count['failed']} failed -> {Path(args.output) / INDEX_FILE}")
@@ -275,6 +277,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="processes matching pairs at once, sharing the CPU threads (default 1)")
     pairs.add_argument("--overwrite", action="store_true", help="recompute the pairs already done in the folder")
     pairs.add_argument("--plot", action="store_true", help="also draw each pair's matches.png")
+    pairs.add_argument("--feature-cache-mb", type=float, default=None, metavar="MB",
+                       help="memory for Slime's block and tile features of recent images, reused by later pairs "
+                            "with the same image (the same matches; default 512; 0: off)")
     _add_match_options(pairs)
     pairs.set_defaults(func=cmd_pairs)
 

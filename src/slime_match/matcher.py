@@ -19,10 +19,13 @@ from .io import MIN_IMAGE_SIDE, ImageLike, load_image
 from .pipelines import PIPELINES, make_base_pipeline
 from .resize import resize_image, to_original
 from .result import MatchResult
+from .slime.level_cache import LevelCache
 from .slime.pipeline import run_slime, stages_to_original
 from .timing import StageTimer
 
 logger = logging.getLogger("slime_match")
+
+FEATURE_CACHE_MB = 512  # default memory for the features of recent images (about 10-25 images of 0.3-0.7 MP)
 
 
 def resolve_device(name: str) -> torch.device:
@@ -42,8 +45,16 @@ class Matcher:
         >>> result = matcher("a.jpg", "b.jpg")
     """
 
-    def __init__(self, config: MatchConfig | None = None) -> None:
+    def __init__(self, config: MatchConfig | None = None, feature_cache_mb: float = FEATURE_CACHE_MB) -> None:
+        """Args:
+            config: the configuration (``make_config()``'s default when None); a copy is kept.
+            feature_cache_mb: memory (MiB) for Slime's block and tile features of the images matched last,
+                reused when a later pair shares an image (the matches are the same); 0 turns it off.
+        """
+        if not feature_cache_mb >= 0:  # NaN too
+            raise ConfigError(f"feature_cache_mb must be >= 0 MiB, got {feature_cache_mb}")
         self.config = copy.deepcopy(config or make_config()).validate()  # the caller's config is left as it is
+        self.level_cache = LevelCache(int(feature_cache_mb * 2**20)) if feature_cache_mb > 0 else None
         self.device = resolve_device(self.config.device)
         self.warnings: list[str] = []
         base = self.config.base
@@ -88,7 +99,8 @@ class Matcher:
         stages = None
         warnings = list(self.warnings)
         if config.method == "slime":
-            output = run_slime(self.pipeline, array0, array1, config.slime, timer, seed=config.seed)
+            output = run_slime(self.pipeline, array0, array1, config.slime, timer, seed=config.seed,
+                               level_cache=self.level_cache)
             xy0, xy1, scores, counts, stages = output.xy0, output.xy1, output.scores, output.counts, output.stages
             warnings += output.warnings
         else:

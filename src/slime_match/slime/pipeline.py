@@ -25,11 +25,13 @@ from ..timing import StageTimer
 from .block_matching import (
     BlockPairMatches,
     LevelRequest,
+    ScaleLevel,
     build_levels_many,
     match_block_pairs,
 )
 from .blocks import Block, BlockConfig, make_blocks, make_tiles
 from .forking import torch_threads
+from .level_cache import LevelCache, fresh_copy, request_key
 from .planes import MatchTable, PlaneConfig, deduplicate, expand_planes
 from .refine import FlowGuide, global_dtm, match_tiles, merge_duplicates
 from .tiles import (
@@ -211,8 +213,13 @@ def select_planes(table: MatchTable, expanded, tiles0: list[Block], tiles1: list
 
 
 def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, config: SlimeConfig,
-              timer: StageTimer | None = None, seed: int = 0) -> SlimeOutput:
+              timer: StageTimer | None = None, seed: int = 0, level_cache: LevelCache | None = None
+              ) -> SlimeOutput:
     """Run Slime on two (H, W, 3) float images with ``pipeline`` as the base.
+
+    Args:
+        level_cache: block and tile features of images met before (with this pipeline and ``config``), read
+            and filled by the features stage; None computes them all.
 
     Returns:
         SlimeOutput with matches in original pixels sorted by score (lower is better).
@@ -244,7 +251,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         if config.refine_tiles:
             requests += [LevelRequest(image, tiles, regions_only=True, detection=config.tile_detection)
                          for image, tiles in ((image0, tiles0), (image1, tiles1))]
-        levels0, levels1, *tile_levels = build_levels_many(pipeline, requests, workers)
+        levels0, levels1, *tile_levels = _levels(pipeline, requests, workers, level_cache)
     with timer("block_pairs"), torch_threads(1):
         bpm, counts = match_block_pairs(pipeline, levels0, levels1, blocks0, blocks1, config.ransac,
                                         bins=config.bins, min_matches=config.min_plane_matches, seed=seed,
@@ -294,6 +301,23 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         stages = _stage_arrays(blocks0, blocks1, tiles0, tiles1, bpm, raw_table, table, h, expanded, selected,
                                tile_xy0, tile_xy1, (all0, all1, all_scores), xy0, xy1)
     return SlimeOutput(xy0, xy1, scores, counts, stages, warnings)
+
+
+def _levels(pipeline: BasePipeline, requests: list[LevelRequest], workers: int, cache: LevelCache | None
+            ) -> list[list[ScaleLevel]]:
+    """``build_levels_many`` on the requests that ``cache`` cannot answer (each distinct one once)."""
+    if cache is None:
+        return build_levels_many(pipeline, requests, workers)
+    keys = [request_key(request) for request in requests]
+    found = {key: cache.get(key) for key in dict.fromkeys(keys)}
+    missing = [key for key, levels in found.items() if levels is None]
+    fresh = build_levels_many(pipeline, [requests[keys.index(key)] for key in missing], workers) if missing else []
+    for key, levels in zip(missing, fresh):
+        cache.put(key, levels)
+        found[key] = levels
+    logger.info("Slime features: %d of %d feature sets (the blocks, the tiles of each image) from the cache",
+                len(found) - len(missing), len(found))
+    return [found[key] if k == keys.index(key) else fresh_copy(found[key]) for k, key in enumerate(keys)]
 
 
 def _boxes_original(blocks: list[Block]) -> np.ndarray:

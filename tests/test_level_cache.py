@@ -1,0 +1,77 @@
+"""The feature cache: Slime's block and tile features of an image reused by the next pairs, same matches."""
+
+import numpy as np
+import pytest
+from conftest import run_cli
+
+from slime_match import Matcher, load_image, make_config
+from slime_match.errors import ConfigError
+from slime_match.slime.block_matching import LevelRequest, ScaleLevel
+from slime_match.slime.blocks import BlockConfig, make_blocks
+from slime_match.slime.level_cache import LevelCache, nbytes, request_key
+
+WEIGHT_FREE_SMALL = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift", "scales": (1,)}
+
+
+def _levels(nbytes_each: int) -> list[ScaleLevel]:
+    """A stand-in level whose only array (the context) holds ``nbytes_each`` bytes."""
+    return [ScaleLevel(1.0, (8, 8), np.zeros(nbytes_each, np.uint8), None, [0], [])]
+
+
+def test_nbytes_counts_each_array_once():
+    shared = np.zeros(100, np.uint8)
+    levels = [ScaleLevel(1.0, (8, 8), shared, None, [0], [np.zeros(10, np.int64)]) for _ in range(2)]
+    assert nbytes(levels) == 100 + 2 * 80
+    assert nbytes({"a": [shared, (shared,)], "b": 3}) == 100
+
+
+def test_get_put_eviction_and_fresh_fixed_caches():
+    cache = LevelCache(budget_bytes=250)
+    cache.put("a", _levels(100))
+    cache.put("b", _levels(100))
+    first = cache.get("a")  # "a" becomes the most recently used
+    first[0].fixed[3] = "filled by a pair"
+    assert cache.get("a")[0].fixed == {}  # each use starts with an empty fixed-orientation cache
+    cache.put("c", _levels(100))  # over budget: "b", the least recently used, goes
+    assert cache.get("b") is None and cache.get("c") is not None and len(cache) == 2
+    assert cache.size_bytes == 200 and (cache.hits, cache.misses) == (3, 1)
+    cache.put("huge", _levels(300))  # larger than the whole budget: not kept, nothing evicted
+    assert cache.get("huge") is None and len(cache) == 2
+    with pytest.raises(ValueError, match=">= 0 bytes"):
+        LevelCache(-1)
+
+
+def test_request_key_follows_pixels_and_request():
+    image = np.random.default_rng(0).random((300, 400, 3), dtype=np.float32)
+    blocks = make_blocks(300, 400, BlockConfig())
+    key = request_key(LevelRequest(image, blocks, detection="merged"))
+    assert request_key(LevelRequest(image.copy(), blocks, detection="merged")) == key  # content, not identity
+    changed = image.copy()
+    changed[5, 5, 0] += 0.5
+    assert request_key(LevelRequest(changed, blocks, detection="merged")) != key
+    assert request_key(LevelRequest(image, blocks, detection="scale")) != key
+    assert request_key(LevelRequest(image, blocks, regions_only=True, detection="merged")) != key
+    assert request_key(LevelRequest(image, make_blocks(300, 400, BlockConfig(scales=(1,))), detection="merged")) != key
+
+
+def test_cached_features_give_the_same_matches(pair):
+    left, right = load_image(pair[0]), load_image(pair[1])
+    config = make_config("slime", **WEIGHT_FREE_SMALL)
+    cached, plain = Matcher(config), Matcher(config, feature_cache_mb=0)
+    assert plain.level_cache is None
+    for a, b in ((left, right), (right, left), (left, left[::-1].copy()), (left, right)):
+        got, expected = cached(a, b), plain(a, b)
+        assert len(expected.scores) > 0
+        for key in ("keypoints0", "keypoints1", "scores"):
+            np.testing.assert_array_equal(getattr(got, key), getattr(expected, key))
+    # blocks and tiles of each image: 4 misses for the first pair, 2 for the flipped image, all else hits
+    assert (cached.level_cache.misses, cached.level_cache.hits) == (6, 10)
+
+
+def test_bad_cache_budgets(tmp_path, capsys, pair):
+    with pytest.raises(ConfigError, match="feature_cache_mb"):
+        Matcher(make_config("slime", **WEIGHT_FREE_SMALL), feature_cache_mb=-1)
+    (tmp_path / "pairs.txt").write_text(f"{pair[0]} {pair[1]}\n")
+    code, _, err = run_cli(capsys, "pairs", tmp_path / "pairs.txt", "-o", tmp_path / "run", "--feature-cache-mb",
+                           "-5", "--method", "slime", "--scales", "1")
+    assert code == 2 and "feature_cache_mb must be >= 0" in err and not (tmp_path / "run").exists()
