@@ -46,8 +46,8 @@ class MatcherMethod:
     def __call__(self, image0: np.ndarray, image1: np.ndarray) -> MethodOutput:
         from slime_match.matcher import Matcher
 
-        if self._matcher is None:
-            self._matcher = Matcher(self.config)
+        if self._matcher is None:  # no feature cache: each pair's seconds count all of its work, in any order
+            self._matcher = Matcher(self.config, feature_cache_mb=0)
         start = time.perf_counter()
         result = self._matcher(image0, image1)
         seconds = time.perf_counter() - start
