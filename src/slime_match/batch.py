@@ -218,10 +218,9 @@ def _match_one(matcher: Matcher, job: PairJob, out: Path, plot: bool) -> dict[st
 def _match_in_pool(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool, workers: int,
                    feature_cache_mb: float) -> Iterator[tuple[int, dict[str, Any]]]:
     """(index, record) of the ``todo`` pairs as they finish in ``workers`` spawned processes, each with a
-    Matcher of ``matcher``'s configuration (and a feature cache of ``feature_cache_mb``) and an equal share of
-    the available CPUs (``available_cpus``:
-    torch threads and Slime's own forked workers). On an interruption the workers are stopped at once (a
-    pair's files are written all or nothing)."""
+    Matcher of ``matcher``'s configuration, a feature cache of ``feature_cache_mb`` and an equal share of the
+    available CPUs (``available_cpus``: torch threads and Slime's own forked workers). On an interruption the
+    workers are stopped at once (a pair's files are written all or nothing)."""
     share = max(1, available_cpus() // workers)
     config = copy.deepcopy(matcher.config)
     if config.slime.workers is None:
