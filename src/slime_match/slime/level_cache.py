@@ -20,11 +20,19 @@ import torch
 from .block_matching import LevelRequest, ScaleLevel
 
 
-def request_key(request: LevelRequest) -> tuple:
-    """What a request's levels depend on besides the configuration: the image's pixels and the request."""
-    image = np.ascontiguousarray(request.image)
-    digest = hashlib.blake2b(image.view(np.uint8), digest_size=16).hexdigest()
-    return digest, image.shape, str(image.dtype), repr(request.blocks), request.regions_only, request.detection
+def request_key(request: LevelRequest, digests: dict[int, str] | None = None) -> tuple:
+    """What a request's levels depend on besides the configuration: the image's pixels and the request.
+
+    Args:
+        digests: digests of images already hashed, by ``id`` of the image array (filled here): an image's
+            block and tile requests hash its pixels once.
+    """
+    image = request.image
+    digests = {} if digests is None else digests
+    if id(image) not in digests:
+        digests[id(image)] = hashlib.blake2b(np.ascontiguousarray(image).view(np.uint8), digest_size=16).hexdigest()
+    return (digests[id(image)], image.shape, str(image.dtype), repr(request.blocks), request.regions_only,
+            request.detection)
 
 
 def nbytes(obj: Any) -> int:

@@ -308,16 +308,20 @@ def _levels(pipeline: BasePipeline, requests: list[LevelRequest], workers: int, 
     """``build_levels_many`` on the requests that ``cache`` cannot answer (each distinct one once)."""
     if cache is None:
         return build_levels_many(pipeline, requests, workers)
-    keys = [request_key(request) for request in requests]
-    found = {key: cache.get(key) for key in dict.fromkeys(keys)}
+    digests: dict[int, str] = {}
+    keys = [request_key(request, digests) for request in requests]
+    first: dict[tuple, int] = {}  # each distinct request, at its first place, in request order
+    for k, key in enumerate(keys):
+        first.setdefault(key, k)
+    found = {key: cache.get(key) for key in first}
     missing = [key for key, levels in found.items() if levels is None]
-    fresh = build_levels_many(pipeline, [requests[keys.index(key)] for key in missing], workers) if missing else []
+    fresh = build_levels_many(pipeline, [requests[first[key]] for key in missing], workers) if missing else []
     for key, levels in zip(missing, fresh):
         cache.put(key, levels)
         found[key] = levels
     logger.info("Slime features: %d of %d feature sets (the blocks, the tiles of each image) from the cache",
                 len(found) - len(missing), len(found))
-    return [found[key] if k == keys.index(key) else fresh_copy(found[key]) for k, key in enumerate(keys)]
+    return [found[key] if first[key] == k else fresh_copy(found[key]) for k, key in enumerate(keys)]
 
 
 def _boxes_original(blocks: list[Block]) -> np.ndarray:
