@@ -1,13 +1,20 @@
 """``slime pairs``: pairs files, one folder per pair, resuming, failures recorded, workers."""
 
+import itertools
 import json
+import multiprocessing
+import os
 import shutil
+import signal
+import threading
+import time
 
+import cv2
 import numpy as np
 import pytest
 from conftest import run_cli
 
-from slime_match.batch import match_pairs, read_pairs
+from slime_match.batch import PairJob, match_pairs, read_pairs
 from slime_match.config import make_config
 from slime_match.cpus import available_cpus
 from slime_match.errors import ConfigError, ImageError
@@ -129,3 +136,48 @@ def test_pool_workers_may_fork_slime_workers(images, tmp_path):
     records = match_pairs(config, jobs, tmp_path / "run", workers=2)
     assert [r["status"] for r in records] == ["done", "done"], records
     assert all(r["matches"] > 100 for r in records)
+
+
+def test_an_exhaustive_run_computes_each_image_once(images, tmp_path):
+    """Four distinct images, every pair: each image's blocks and tiles are computed once, the rest comes from
+    the feature cache, whatever the order the pairs are matched in; records stay in file order."""
+    left = cv2.imread(str(images / "left.png"))
+    right = cv2.imread(str(images / "right.png"))
+    cv2.imwrite(str(images / "left_flipped.png"), left[:, ::-1])
+    cv2.imwrite(str(images / "right_flipped.png"), right[:, ::-1])
+    names = ["left.png", "left_flipped.png", "right.png", "right_flipped.png"]
+    pairs = _pairs_file(tmp_path, "".join(f"{a} {b}\n" for a, b in itertools.combinations(names, 2)))
+    config = make_config("slime", **{k.strip("-"): v for k, v in zip(SLIME_SMALL[::2], SLIME_SMALL[1::2])})
+    records = match_pairs(config, read_pairs(pairs, images), tmp_path / "run")
+    assert [(r["image0"], r["image1"]) for r in records] == list(itertools.combinations(names, 2))
+    cached = [json.loads((tmp_path / "run" / r["folder"] / "summary.json").read_text())["counts"]
+              ["cached_feature_sets"] for r in records]
+    assert sum(cached) == 6 * 4 - 4 * 2, cached
+
+
+def test_a_dead_worker_fails_its_pair_and_is_replaced(images, tmp_path):
+    """Two workers stuck on their pairs (FIFOs without a writer: reading them never ends) are killed: their two
+    pairs fail with the reason, and a new worker matches the pair that was left."""
+    for name in ("stuck0.png", "stuck1.png"):
+        os.mkfifo(images / name)
+    jobs = [PairJob(name, "right.png", images / name, images / "right.png", f"{name}__right.png")
+            for name in ("stuck0.png", "stuck1.png")]
+    jobs += read_pairs(_pairs_file(tmp_path, "left.png right.png\n"), images)
+
+    def kill_both_workers():
+        deadline = time.monotonic() + 120
+        while len(workers := [p for p in multiprocessing.active_children() if p.name == "slime-pairs-worker"]) < 2:
+            assert time.monotonic() < deadline
+            time.sleep(0.1)
+        time.sleep(1)
+        for process in workers:
+            os.kill(process.pid, signal.SIGKILL)
+
+    killer = threading.Thread(target=kill_both_workers)
+    killer.start()
+    records = match_pairs(make_config("rootsift"), jobs, tmp_path / "run", workers=2)
+    killer.join()
+    assert [r["status"] for r in records] == ["failed", "failed", "done"], records
+    assert all("worker process died (exit code -9" in r["error"] for r in records[:2])
+    assert records[2]["matches"] > 100
+    assert not (tmp_path / "run" / "stuck0.png__right.png").exists()

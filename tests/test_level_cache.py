@@ -41,6 +41,13 @@ def test_get_put_eviction_and_fresh_fixed_caches():
         LevelCache(-1)
 
 
+def test_image_count_counts_digests():
+    cache = LevelCache(budget_bytes=1000)
+    for key in (("digest0", "blocks"), ("digest0", "tiles"), ("digest1", "blocks")):  # request_key's layout
+        cache.put(key, _levels(10))
+    assert len(cache) == 3 and cache.image_count == 2
+
+
 def test_request_key_follows_pixels_and_request():
     image = np.random.default_rng(0).random((300, 400, 3), dtype=np.float32)
     blocks = make_blocks(300, 400, BlockConfig())

@@ -12,13 +12,15 @@ from __future__ import annotations
 import copy
 import json
 import logging
+import multiprocessing
 import os
 import signal
 import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
-from multiprocessing.context import SpawnContext, SpawnProcess
+from multiprocessing.connection import Connection, wait
+from multiprocessing.context import SpawnProcess
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +33,7 @@ from .errors import ConfigError, ImageError, some_of
 from .io import jsonable, load_image, save_json
 from .matcher import FEATURE_CACHE_MB, Matcher
 from .outputs import SUMMARY_FILE, is_complete, write_pair_outputs
+from .pair_schedule import PairScheduler, RecentImages
 
 logger = logging.getLogger("slime_match")
 
@@ -141,9 +144,9 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
     progress = tqdm(total=len(jobs), initial=len(records), desc="pairs", unit="pair", file=sys.stderr,
                     disable=None)
     if workers == 1 or len(todo) <= 1:
-        finished = ((index, _match_one(matcher, jobs[index], out, plot)) for index in todo)
+        finished = _match_in_process(matcher, jobs, todo, out, plot)
     else:
-        finished = _match_in_pool(matcher, jobs, todo, out, plot, workers, feature_cache_mb / workers)
+        finished = _match_in_workers(matcher, jobs, todo, out, plot, workers, feature_cache_mb / workers)
     try:
         for index, record in finished:
             records[index] = record
@@ -152,7 +155,7 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
             progress.set_postfix_str(f"{record['image0']} {record['image1']}: {record['matches'] or 0} matches")
             progress.update()
     finally:
-        finished.close()  # stops the pool's workers when the loop ends early
+        finished.close()  # stops the workers when the loop ends early
         progress.close()
         ordered = [records[i] for i in sorted(records)]
         save_json(out / INDEX_FILE, {"pairs": ordered, "finished": len(records) == len(jobs)})
@@ -215,62 +218,107 @@ def _match_one(matcher: Matcher, job: PairJob, out: Path, plot: bool) -> dict[st
     return _record(job, "done", len(result), result.summary["seconds"]["total"])
 
 
-def _match_in_pool(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool, workers: int,
-                   feature_cache_mb: float) -> Iterator[tuple[int, dict[str, Any]]]:
-    """(index, record) of the ``todo`` pairs as they finish in ``workers`` spawned processes, each with a
-    Matcher of ``matcher``'s configuration, a feature cache of ``feature_cache_mb`` and an equal share of the
-    available CPUs (``available_cpus``: torch threads and Slime's own forked workers). On an interruption the
-    workers are stopped at once (a pair's files are written all or nothing)."""
+def _match_in_process(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool
+                      ) -> Iterator[tuple[int, dict[str, Any]]]:
+    """(index, record) of the ``todo`` pairs matched here, in the order that best reuses the feature cache."""
+    scheduler = PairScheduler([_images(jobs[index]) for index in todo])
+    recent = RecentImages()
+    while (position := scheduler.next(recent.held(_cached_images(matcher)))) is not None:
+        job = jobs[todo[position]]
+        record = _match_one(matcher, job, out, plot)
+        recent.touch(_images(job))
+        yield todo[position], record
+
+
+def _images(job: PairJob) -> tuple[str, str]:
+    return str(job.path0), str(job.path1)
+
+
+def _cached_images(matcher: Matcher) -> int:
+    return 0 if matcher.level_cache is None else matcher.level_cache.image_count
+
+
+def _match_in_workers(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool,
+                      workers: int, feature_cache_mb: float) -> Iterator[tuple[int, dict[str, Any]]]:
+    """(index, record) of the ``todo`` pairs as they finish in ``workers`` spawned processes.
+
+    Each worker has a Matcher of ``matcher``'s configuration, a feature cache of ``feature_cache_mb`` and an
+    equal share of the available CPUs (``available_cpus``: torch threads and Slime's own forked workers). A
+    worker that finishes a pair is given the pair that best reuses the images its cache holds
+    (:class:`PairScheduler`). A worker that dies (killed, out of memory) fails its pair and is replaced. On an
+    interruption the workers are stopped at once (a pair's files are written all or nothing).
+    """
     share = max(1, available_cpus() // workers)
     config = copy.deepcopy(matcher.config)
     if config.slime.workers is None:
         config.slime.workers = share
-    tasks = [(index, jobs[index], out, plot) for index in todo]
-    pool = _ParentContext().Pool(workers, initializer=_init_worker,
-                                  initargs=(config, share, feature_cache_mb))
-    try:  # spawn, not fork: a forked copy of the parent's torch and OpenMP thread pools can deadlock
-        yield from pool.imap_unordered(_match_in_worker, tasks)
-        pool.close()
-    except BaseException:
-        pool.terminate()
-        raise
+    scheduler = PairScheduler([_images(jobs[index]) for index in todo])
+    context = multiprocessing.get_context("spawn")  # not fork: a forked copy of torch's thread pools can deadlock
+    running: dict[Connection, tuple[SpawnProcess, int]] = {}  # a worker's pipe -> it and its pair (todo position)
+    stopping: list[tuple[Connection, SpawnProcess]] = []  # workers told that no pair is left
+
+    def start_worker(position: int) -> None:
+        ours, theirs = context.Pipe()
+        process = context.Process(target=_worker_main, args=(theirs, config, share, feature_cache_mb, out, plot),
+                                  name="slime-pairs-worker")  # not daemonic: Slime forks workers of its own
+        process.start()
+        theirs.close()
+        ours.send(jobs[todo[position]])
+        running[ours] = (process, position)
+
+    finished = False
+    try:
+        for _ in range(min(workers, len(todo))):
+            start_worker(scheduler.next())
+        while running:
+            for pipe in wait(list(running)):
+                process, position = running.pop(pipe)
+                try:
+                    record, cached = pipe.recv()
+                except (EOFError, OSError):  # the worker died in this pair
+                    process.join()
+                    pipe.close()
+                    record = _record(jobs[todo[position]], "failed", error="the worker process died (exit code "
+                                     f"{process.exitcode}; out of memory?)")
+                    if len(scheduler):
+                        start_worker(scheduler.next())
+                else:
+                    following = scheduler.next(cached)
+                    try:
+                        pipe.send(None if following is None else jobs[todo[following]])
+                    except OSError:  # the worker died after its answer: a new one takes its next pair
+                        process.join()
+                        pipe.close()
+                        if following is not None:
+                            start_worker(following)
+                    else:
+                        if following is None:  # told to stop
+                            stopping.append((pipe, process))
+                        else:
+                            running[pipe] = (process, following)
+                yield todo[position], record
+        finished = True
     finally:
-        pool.join()
+        for pipe, process in [*stopping, *((pipe, process) for pipe, (process, _) in running.items())]:
+            if not finished:
+                process.terminate()
+            process.join()
+            pipe.close()
 
 
-class _ParentProcess(SpawnProcess):
-    """A spawned pool worker that is not daemonic, so that Slime in it can fork its own workers (a daemonic
-    process cannot have children). The pool still terminates it on an interruption."""
-
-    @property
-    def daemon(self) -> bool:
-        return False
-
-    @daemon.setter
-    def daemon(self, value: bool) -> None:
-        pass
-
-
-class _ParentContext(SpawnContext):
-    Process = _ParentProcess
-
-
-_WORKER_MATCHER = None
-
-
-def _init_worker(config: MatchConfig, threads: int, feature_cache_mb: float) -> None:
+def _worker_main(pipe: Connection, config: MatchConfig, threads: int, feature_cache_mb: float, out: Path,
+                 plot: bool) -> None:
+    """A worker of :func:`_match_in_workers`: match the pairs it is sent (None: stop), answering each with its
+    record and the images its feature cache holds, the most recently used first."""
     import numba
     import torch
 
-    from .matcher import Matcher
-
-    global _WORKER_MATCHER
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle: it stops the workers
     torch.set_num_threads(threads)
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-    _WORKER_MATCHER = Matcher(config, feature_cache_mb=feature_cache_mb)
-
-
-def _match_in_worker(task: tuple[int, PairJob, Path, bool]) -> tuple[int, dict[str, Any]]:
-    index, job, out, plot = task
-    return index, _match_one(_WORKER_MATCHER, job, out, plot)
+    matcher = Matcher(config, feature_cache_mb=feature_cache_mb)
+    recent = RecentImages()
+    while (job := pipe.recv()) is not None:
+        record = _match_one(matcher, job, out, plot)
+        recent.touch(_images(job))
+        pipe.send((record, recent.held(_cached_images(matcher))))

@@ -86,6 +86,11 @@ class LevelCache:
     def size_bytes(self) -> int:
         return sum(size for _, size in self._entries.values())
 
+    @property
+    def image_count(self) -> int:
+        """The images (distinct pixel digests, :func:`request_key`'s first field) with levels held."""
+        return len({key[0] for key in self._entries})
+
     def get(self, key: tuple) -> list[ScaleLevel] | None:
         """The levels stored under ``key`` (with empty fixed-orientation caches), or None."""
         entry = self._entries.get(key)

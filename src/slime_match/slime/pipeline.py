@@ -251,14 +251,14 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         if config.refine_tiles:
             requests += [LevelRequest(image, tiles, regions_only=True, detection=config.tile_detection)
                          for image, tiles in ((image0, tiles0), (image1, tiles1))]
-        levels0, levels1, *tile_levels = _levels(pipeline, requests, workers, level_cache)
+        (levels0, levels1, *tile_levels), cached_sets = _levels(pipeline, requests, workers, level_cache)
     with timer("block_pairs"), torch_threads(1):
         bpm, counts = match_block_pairs(pipeline, levels0, levels1, blocks0, blocks1, config.ransac,
                                         bins=config.bins, min_matches=config.min_plane_matches, seed=seed,
                                         workers=workers)
     raw_table, h, side = block_planes_to_original(bpm, blocks0, blocks1)
     table, _ = deduplicate(raw_table)
-    counts.update(block_matches=len(raw_table), block_matches_unique=len(table))
+    counts.update(cached_feature_sets=cached_sets, block_matches=len(raw_table), block_matches_unique=len(table))
     with timer("expansion"):
         expanded = expand_planes(table, h, side, config.planes, threads=workers)
     counts["expanded_memberships"] = int(expanded.nnz)
@@ -304,10 +304,11 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
 
 
 def _levels(pipeline: BasePipeline, requests: list[LevelRequest], workers: int, cache: LevelCache | None
-            ) -> list[list[ScaleLevel]]:
-    """``build_levels_many`` on the requests that ``cache`` cannot answer (each distinct one once)."""
+            ) -> tuple[list[list[ScaleLevel]], int]:
+    """``build_levels_many`` on the requests that ``cache`` cannot answer (each distinct one once), and how
+    many distinct requests the cache answered."""
     if cache is None:
-        return build_levels_many(pipeline, requests, workers)
+        return build_levels_many(pipeline, requests, workers), 0
     digests: dict[int, str] = {}
     keys = [request_key(request, digests) for request in requests]
     first: dict[tuple, int] = {}  # each distinct request, at its first place, in request order
@@ -321,7 +322,7 @@ def _levels(pipeline: BasePipeline, requests: list[LevelRequest], workers: int, 
         found[key] = levels
     logger.info("Slime features: %d of %d feature sets (the blocks, the tiles of each image) from the cache",
                 len(found) - len(missing), len(found))
-    return [found[key] if first[key] == k else fresh_copy(found[key]) for k, key in enumerate(keys)]
+    return [found[key] if first[key] == k else fresh_copy(found[key]) for k, key in enumerate(keys)], len(found) - len(missing)
 
 
 def _boxes_original(blocks: list[Block]) -> np.ndarray:
