@@ -211,6 +211,7 @@ def test_torch_kernels_match_opencv_paths():
         np.stack([cv2.resize(ch, None, fx=2, fy=2, interpolation=cv2.INTER_LANCZOS4) for ch in x.numpy()])
     )
     assert up.shape == (2, 74, 104) and torch.allclose(up, ref, atol=1e-5)
+    assert torch.equal(hz._lanczos_upsample2(x), ref)  # OpenCV writing each channel into place
 
 
 def test_torch_path_matches_opencv_path(monkeypatch):
