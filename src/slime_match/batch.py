@@ -111,6 +111,9 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
                 ) -> list[dict[str, Any]]:
     """Match every pair into ``output/<folder>/``, skipping the pairs already finished there.
 
+    The pairs are matched in the order that best reuses each worker's feature cache
+    (:class:`~slime_match.pair_schedule.PairScheduler`); the records keep ``jobs`` order.
+
     Args:
         config: the matcher configuration (the same for every pair).
         jobs: pairs from :func:`read_pairs`.
