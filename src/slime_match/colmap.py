@@ -23,6 +23,7 @@ from tqdm import tqdm
 from .errors import ConfigError, ImageError, SlimeMatchError
 from .io import save_json
 from .outputs import SUMMARY_FILE
+from .pair_lists import write_pairs
 from .run_export import (
     PairMatches,
     check_export_folder,
@@ -161,7 +162,7 @@ def export_run(run: str | os.PathLike, image_dir: str | os.PathLike, output: str
         database = staging / DATABASE_FILE
         write_database(database, image_dir, keypoints, pairs, matches, camera_mode)
         pairs_file = staging / VERIFIED_PAIRS_FILE
-        pairs_file.write_text("".join(f"{p.name0} {p.name1}\n" for p in pairs))
+        write_pairs(pairs_file, [(p.name0, p.name1) for p in pairs])
         verification = pycolmap.TwoViewGeometryOptions()
         verification.ransac.random_seed = seed
         pycolmap.verify_matches(database, pairs_file, verification)

@@ -20,8 +20,9 @@ from typing import Any
 import numpy as np
 
 from .errors import ConfigError
-from .io import image_size, save_json, save_text
+from .io import image_size, save_json
 from .outputs import SUMMARY_FILE
+from .pair_lists import write_pairs
 from .run_export import check_export_folder, check_images, merge_keypoints, read_run, staged_folder
 
 logger = logging.getLogger("slime_match")
@@ -89,7 +90,7 @@ def export_hloc(run: str | os.PathLike, image_dir: str | os.PathLike, output: st
                 group = matches_h5.require_group(pair_key(pair.name0, pair.name1))
                 group.create_dataset("matches0", data=matches0)
                 group.create_dataset("matching_scores0", data=scores0)
-        save_text(staging / PAIRS_FILE, "".join(f"{p.name0} {p.name1}\n" for p in pairs))
+        write_pairs(staging / PAIRS_FILE, [(p.name0, p.name1) for p in pairs])
         summary = {
             "run": str(run), "images": len(names), "pairs": len(pairs), "merge_radius": merge_radius,
             "inliers_only": inliers_only, "keypoints": int(sum(len(k) for k in keypoints.values())),

@@ -320,9 +320,10 @@ def _levels(pipeline: BasePipeline, requests: list[LevelRequest], workers: int, 
     for key, levels in zip(missing, fresh):
         cache.put(key, levels)
         found[key] = levels
+    reused = len(found) - len(missing)
     logger.info("Slime features: %d of %d feature sets (the blocks, the tiles of each image) from the cache",
-                len(found) - len(missing), len(found))
-    return [found[key] if first[key] == k else fresh_copy(found[key]) for k, key in enumerate(keys)], len(found) - len(missing)
+                reused, len(found))
+    return [found[key] if first[key] == k else fresh_copy(found[key]) for k, key in enumerate(keys)], reused
 
 
 def _boxes_original(blocks: list[Block]) -> np.ndarray:
