@@ -72,6 +72,7 @@ def test_pairs_run_resume_failures_and_config_guard(images, tmp_path, capsys):
     out = tmp_path / "run"
     code, stdout, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST)
     assert code == 1 and "3 pairs: 2 matched, 0 already done, 1 failed" in stdout, err
+    assert "feature cache" not in stdout  # the base alone has no block or tile features
     index = json.loads((out / "pairs.json").read_text())
     assert index["finished"] and [r["status"] for r in index["pairs"]] == ["done", "done", "failed"]
     assert "broken.png" in index["pairs"][2]["error"] and not (out / "left.png__broken.png").exists()
@@ -115,10 +116,12 @@ def test_pairs_workers_give_the_same_matches(images, tmp_path, capsys):
     runs = {}
     for workers in (1, 2):
         out = tmp_path / f"run{workers}"
-        code, _, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *SLIME_SMALL,
-                            "--workers", workers)
+        code, stdout, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *SLIME_SMALL,
+                                    "--workers", workers)
         assert code == 0, err
         runs[workers] = out
+        if workers == 1:  # the first pair computes the blocks and tiles of its 2 images, the others reuse them
+            assert "feature cache: 8 of 12 feature sets" in stdout, stdout
     for folder in ("left.png__right.png", "right.png__left.png", "left.png__sub-right.png"):
         a, b = (np.load(runs[w] / folder / "matches.npz") for w in (1, 2))
         assert len(a["scores"]) > 100 and np.array_equal(a["keypoints0"], b["keypoints0"])
@@ -150,9 +153,11 @@ def test_an_exhaustive_run_computes_each_image_once(images, tmp_path):
     config = make_config("slime", **{k.strip("-"): v for k, v in zip(SLIME_SMALL[::2], SLIME_SMALL[1::2])})
     records = match_pairs(config, read_pairs(pairs, images), tmp_path / "run")
     assert [(r["image0"], r["image1"]) for r in records] == list(itertools.combinations(names, 2))
-    cached = [json.loads((tmp_path / "run" / r["folder"] / "summary.json").read_text())["counts"]
-              ["cached_feature_sets"] for r in records]
-    assert sum(cached) == 6 * 4 - 4 * 2, cached
+    counts = [json.loads((tmp_path / "run" / r["folder"] / "summary.json").read_text())["counts"] for r in records]
+    assert [(r["feature_sets"], r["cached_feature_sets"]) for r in records] == [
+        (c["feature_sets"], c["cached_feature_sets"]) for c in counts]
+    assert sum(r["feature_sets"] for r in records) == 6 * 4
+    assert sum(r["cached_feature_sets"] for r in records) == 6 * 4 - 4 * 2, records
 
 
 def test_a_dead_worker_fails_its_pair_and_is_replaced(images, tmp_path):

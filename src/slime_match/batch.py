@@ -126,7 +126,8 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
 
     Returns:
         One record per pair, in ``jobs`` order: names, folder, status ("done", "skipped" or "failed"),
-        matches, seconds and, for failures, the error. The same list is written to ``output/pairs.json``.
+        matches, seconds, for Slime the feature sets it used and how many of them came from the cache
+        (``feature_sets``, ``cached_feature_sets``) and, for failures, the error. The same list is written to ``output/pairs.json``.
 
     Raises:
         ConfigError: ``workers`` < 1, or ``output`` holds a run with another configuration.
@@ -192,17 +193,24 @@ def _differences(a: dict, b: dict, prefix: str = "") -> list[str]:
 
 
 def _record(job: PairJob, status: str, matches: int | None = None, seconds: float | None = None,
-            error: str | None = None) -> dict[str, Any]:
+            error: str | None = None, **cache: int) -> dict[str, Any]:
+    """A pair's entry of pairs.json; ``cache``: Slime's ``feature_sets`` and ``cached_feature_sets``."""
     record = {"image0": job.name0, "image1": job.name1, "folder": job.folder, "status": status,
-              "matches": matches, "seconds": seconds}
+              "matches": matches, "seconds": seconds, **cache}
     if error is not None:
         record["error"] = error
     return record
 
 
+def _cache_counts(counts: dict[str, Any]) -> dict[str, int]:
+    """The feature-set counts of a Slime summary's ``counts`` (none for the other methods)."""
+    return {key: counts[key] for key in ("feature_sets", "cached_feature_sets") if key in counts}
+
+
 def _finished_counts(folder: Path) -> dict[str, Any]:
     summary = json.loads((folder / SUMMARY_FILE).read_text())
-    return {"matches": summary["counts"]["matches"], "seconds": summary["seconds"]["total"]}
+    return {"matches": summary["counts"]["matches"], "seconds": summary["seconds"]["total"],
+            **_cache_counts(summary["counts"])}
 
 
 def _match_one(matcher: Matcher, job: PairJob, out: Path, plot: bool) -> dict[str, Any]:
@@ -218,7 +226,8 @@ def _match_one(matcher: Matcher, job: PairJob, out: Path, plot: bool) -> dict[st
         logger.exception("pair %s %s failed", job.name0, job.name1)
         return _record(job, "failed", seconds=round(time.perf_counter() - start, 4),
                        error=f"{type(error).__name__}: {error}")
-    return _record(job, "done", len(result), result.summary["seconds"]["total"])
+    return _record(job, "done", len(result), result.summary["seconds"]["total"],
+                   **_cache_counts(result.summary["counts"]))
 
 
 def _match_in_process(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool

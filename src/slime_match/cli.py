@@ -134,6 +134,11 @@ def cmd_pairs(args: argparse.Namespace) -> int:
     count = {status: sum(r["status"] == status for r in records) for status in ("done", "skipped", "failed")}
     print(f"{len(records)} pairs: {count['done']} matched, {count['skipped']} already done, "
           f"{count['failed']} failed -> {Path(args.output) / INDEX_FILE}")
+    matched = [r for r in records if r["status"] == "done" and "feature_sets" in r]
+    if matched:
+        print(f"feature cache: {sum(r['cached_feature_sets'] for r in matched)} of "
+              f"{sum(r['feature_sets'] for r in matched)} feature sets (an image's blocks or tiles) of the matched "
+              "pairs were reused")
     return 1 if count["failed"] else 0
 
 

@@ -258,7 +258,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
                                         workers=workers)
     raw_table, h, side = block_planes_to_original(bpm, blocks0, blocks1)
     table, _ = deduplicate(raw_table)
-    counts.update(cached_feature_sets=cached_sets, block_matches=len(raw_table), block_matches_unique=len(table))
+    counts.update(feature_sets=len(requests), cached_feature_sets=cached_sets, block_matches=len(raw_table),
+                  block_matches_unique=len(table))
     with timer("expansion"):
         expanded = expand_planes(table, h, side, config.planes, threads=workers)
     counts["expanded_memberships"] = int(expanded.nnz)
