@@ -9,10 +9,16 @@ exact greedy results computed by a vectorised dependency resolution over k-d tre
 Choices the spec leaves open: a working pixel u of the 2x image maps to the original pixel u / 2 - 0.25 (the
 exact inverse of the resize under the pixel-centre convention, rather than u / 2); Gaussian kernels have
 radius ceil(3 sigma) and reflected borders; peaks whose 7x7 window leaves the image are not considered.
+
+Memory: a working image larger than ``WHOLE_PIXELS`` is filtered in strips of rows, each with enough margin
+that its rows are computed exactly as on the whole image (the filters are separable and row-independent);
+only the structure tensor (3 floats a pixel) and two masks are kept whole, because the mask threshold and the
+z-scores are statistics of the whole image, summed row by row. The keypoints do not depend on the strips.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 from dataclasses import dataclass
@@ -31,6 +37,8 @@ logger = logging.getLogger("slime_match")
 
 _SQRT2 = math.sqrt(2.0)
 _GREY_WEIGHTS = (0.299, 0.587, 0.114)
+WHOLE_PIXELS = 8_000_000  # a working image up to this many pixels (a 2 MP photo's 2x levels) is filtered whole,
+STRIP_PIXELS = 3_000_000  # a larger one in strips of at most this many
 
 
 @dataclass
@@ -101,15 +109,8 @@ def detect_harrisz(image: torch.Tensor, config: HarrisZConfig | None = None) -> 
         logger.debug("HarrisZ+: image %dx%d too small for the filters, no keypoints", width, height)
         return _empty_keypoints(device)
 
-    gradients: dict[int, tuple[torch.Tensor, ...]] = {}
-    parts = []
-    for k in range(cfg.num_levels):
-        factor = 2 if k < cfg.upsampled_levels else 1
-        if factor not in gradients:  # the 2x image lives only while its gradients are computed
-            gradients[factor] = _gradient_fields(_lanczos_upsample2(img) if factor == 2 else img, cfg.color)
-        parts.append(_detect_level(gradients[factor], k, factor, cfg))
-        if k + 1 == cfg.upsampled_levels:
-            del gradients[2]  # the 2x fields (4 x 4 H W floats) are not needed by the later levels
+    fields = _WorkingFields(img, cfg.color)
+    parts = [_detect_level(fields, k, 2 if k < cfg.upsampled_levels else 1, cfg) for k in range(cfg.num_levels)]
     xy, ellipse, response, level = (np.concatenate(a) for a in zip(*parts))
 
     upsampled = np.flatnonzero(level < cfg.upsampled_levels)
@@ -206,15 +207,17 @@ def _central_gradient(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return gx.mul_(0.5), gy.mul_(0.5)
 
 
-def _gradient_fields(image: torch.Tensor, color: bool) -> tuple[torch.Tensor, ...]:
+def _gradient_fields(image: torch.Tensor, color: bool, mask: bool = True) -> tuple[torch.Tensor, ...]:
     """Grey gradient (for the Harris tensor) and mask gradient ("best" colour field, or grey) of an image.
 
     Args:
         image: (C, H, W) with C in {1, 3}.
         color: build the colour best field when C == 3.
+        mask: also return the mask gradient.
 
     Returns:
-        gx, gy, bx, by: (H, W) each; bx, by are gx, gy themselves when there is no colour field.
+        gx, gy, bx, by: (H, W) each; bx, by are gx, gy themselves when there is no colour field; only gx, gy
+        when ``mask`` is False.
     """
     if image.shape[0] == 3:
         r, g, b = _GREY_WEIGHTS
@@ -223,6 +226,8 @@ def _gradient_fields(image: torch.Tensor, color: bool) -> tuple[torch.Tensor, ..
         grey = image[0]
     gx, gy = _central_gradient(grey)
     del grey
+    if not mask:
+        return gx, gy
     if not (color and image.shape[0] == 3):
         return gx, gy, gx, gy
     mx, my = _central_gradient(image.amax(0))
@@ -286,21 +291,67 @@ def _max_filter_torch(x: torch.Tensor, window: int) -> torch.Tensor:
     return F.max_pool2d(pooled, (window, 1), stride=1, padding=(h, 0))[0, 0]
 
 
-def _zscore(x: torch.Tensor) -> torch.Tensor:
-    """z-score of an (H, W) image over all its pixels (zeros for a constant image); may reuse x's memory."""
-    centred = x.sub_(x.mean())
-    flat = centred.view(-1)
-    std = torch.sqrt(torch.dot(flat, flat) / max(flat.numel() - 1, 1))  # BLAS dot: ~8x faster than std_mean
-    return centred.div_(std) if bool(std > 0) else centred.zero_()
+class _WorkingFields:
+    """Gradient fields of the working images (the image, or its 2x Lanczos upsampling) over ranges of rows.
+
+    The fields of the last range asked for are kept, so that the levels and passes that ask for the same
+    range (all of them when the image is one strip) compute it once.
+    """
+    # (factor, start, stop, with the mask gradient) and the fields
+
+    def __init__(self, image: torch.Tensor, color: bool):
+        self.image, self.color = image, color
+        self._kept: tuple[tuple[int, int, int, bool], tuple[torch.Tensor, ...]] | None = None
+
+    def shape(self, factor: int) -> tuple[int, int]:
+        """(h, w) of the working image at ``factor``."""
+        return factor * self.image.shape[1], factor * self.image.shape[2]
+
+    def rows(self, factor: int, start: int, stop: int, mask: bool = True) -> tuple[torch.Tensor, ...]:
+        """gx, gy, bx, by (see :func:`_gradient_fields`; gx, gy first when ``mask`` is False) of working rows
+        start..stop-1, (stop - start, w) each, equal to those rows of the whole working image's fields."""
+        key = (factor, start, stop, mask)
+        if self._kept is None or self._kept[0] not in (key, (factor, start, stop, True)):
+            self._kept = None  # freed before the next range is computed
+            height = self.shape(factor)[0]
+            lo, hi = max(0, start - 1), min(height, stop + 1)  # central differences need a row either side
+            if factor == 1:
+                source = self.image[:, lo:hi]
+            else:  # 2x row u samples original row u / 2 - 0.25 with taps floor(.) - 3 .. floor(.) + 4
+                first, last = max(0, lo // 2 - 5), min(self.image.shape[1], (hi + 1) // 2 + 5)
+                source = _lanczos_upsample2(self.image[:, first:last])[:, lo - 2 * first : hi - 2 * first]
+            fields = _gradient_fields(source, self.color, mask)
+            self._kept = key, tuple(f[start - lo : stop - lo] for f in fields)
+        return self._kept[1]
+
+
+def _strips(height: int, width: int) -> list[tuple[int, int]]:
+    """Row ranges [start, stop) covering ``height`` rows of width ``width``: one, or strips of <= STRIP_PIXELS."""
+    pixels = height * width
+    count = 1 if pixels <= WHOLE_PIXELS else min(height, math.ceil(pixels / STRIP_PIXELS))
+    bounds = [round(i * height / count) for i in range(count + 1)]
+    return list(itertools.pairwise(bounds))
+
+
+def _blurred_rows(channels: list[torch.Tensor], sigma: float, start: int, stop: int, first: int
+                  ) -> list[torch.Tensor]:
+    """Rows start..stop-1 of the Gaussian-blurred images whose rows first.. are ``channels``."""
+    return [blurred[start - first : stop - first] for blurred in _gaussian_blur(channels, sigma)]
+
+
+def _total(x: torch.Tensor) -> float:
+    """Sum of an (h, w) float image: each row's in float32, the rows' in float64, so that strips of whole
+    rows add up to the whole image's sum."""
+    return float(x.sum(1).double().sum())
 
 
 def _detect_level(
-    fields_: tuple[torch.Tensor, ...], k: int, factor: int, cfg: HarrisZConfig
+    fields: _WorkingFields, k: int, factor: int, cfg: HarrisZConfig
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Keypoints of one scale level.
+    """Keypoints of one scale level, filtered strip by strip (see the module's docstring).
 
     Args:
-        fields_: raw gradients (gx, gy, bx, by) of the working image (original or 2x), (h, w) each.
+        fields: gradients of the working images.
         k: level index; integration sigma sqrt(2)^k and derivative sigma sqrt(2)^(k-1) in original pixels.
         factor: working-image scale (2 on upsampled levels, else 1).
         cfg: detector parameters.
@@ -310,32 +361,26 @@ def _detect_level(
     """
     s_i = _SQRT2**k
     s_d = s_i / _SQRT2
-    gx, gy, bx, by = fields_
-    # one full-size array at a time where possible: at 12 MP a 2x field is 192 MB
-    smooth_b = _gaussian_blur([bx, by], s_d * factor)
-    magnitude = torch.hypot(*smooth_b)
-    smooth_g = smooth_b if bx is gx else None
-    del smooth_b
-    mask = _gaussian_blur([(magnitude > magnitude.mean()).to(magnitude.dtype)], s_d * factor)[0]
-    del magnitude
-    dx, dy = smooth_g or _gaussian_blur([gx, gy], s_d * factor)
-    del smooth_g
-    dx.mul_(mask)
-    dy.mul_(mask)
-    a, b, c = (_gaussian_blur([p * q], s_i * factor)[0] for p, q in ((dx, dx), (dy, dy), (dx, dy)))
-    del dx, dy
-    response = _zscore(torch.addcmul(a * b, c, c, value=-1.0)).sub_(_zscore((a + b).square_()))
-
-    ys, xs = _unique_peaks(response, mask, cfg.peak_window, cfg.mask_threshold)
-    if len(ys) == 0:
+    height, width = fields.shape(factor)
+    strips = _strips(height, width)
+    a, b, c, strong = _structure_tensor(fields, factor, strips, s_d * factor, s_i * factor, cfg.mask_threshold)
+    means, stds = _harris_statistics(a, b, c, strips)
+    h = cfg.peak_window // 2
+    peaks = []
+    for start, stop in strips:  # the peaks of rows start..stop-1: their windows lie within lo..hi-1
+        lo, hi = max(0, start - h), min(height, stop + h)
+        det, trace2 = _harris_terms(a, b, c, lo, hi)
+        response = _zscored(det, means[0], stds[0]).sub_(_zscored(trace2, means[1], stds[1]))
+        ys, xs = _unique_peaks(response, strong[lo:hi], cfg.peak_window)
+        steps = ((0, 0), (0, -1), (0, 1), (-1, 0), (1, 0))  # the peak and its 4 neighbours (parabola fits)
+        samples = [response[ys + dy, xs + dx] for dy, dx in steps] + [t[ys + lo, xs] for t in (a, b, c)]
+        peaks.append((torch.stack(samples, dim=1).double().cpu().numpy(),
+                      torch.stack((xs, ys + lo), dim=1).cpu().numpy().astype(np.float64)))
+    values, peaks_xy = (np.concatenate(p) for p in zip(*peaks))
+    if len(values) == 0:
         return _empty_level()
-    # response at the peak and its 4 neighbours (parabola fits), then the second-moment matrix entries
-    steps = ((0, 0), (0, -1), (0, 1), (-1, 0), (1, 0))
-    samples = [response[ys + dy, xs + dx] for dy, dx in steps] + [t[ys, xs] for t in (a, b, c)]
-    values = torch.stack(samples, dim=1).double().cpu().numpy()
 
     order = np.argsort(-values[:, 0], kind="stable")
-    peaks_xy = torch.stack((xs, ys), dim=1).cpu().numpy().astype(np.float64)
     keep = order[_greedy_keep(peaks_xy[order], math.ceil(3.0 * s_d * factor))]
     values, peaks_xy = values[keep], peaks_xy[keep]
 
@@ -353,14 +398,89 @@ def _detect_level(
     return xy, ellipse[good], r0[good], np.full(int(good.sum()), k, np.int64)
 
 
+def _structure_tensor(
+    fields: _WorkingFields, factor: int, strips: list[tuple[int, int]], sigma_d: float, sigma_i: float,
+    mask_threshold: float
+) -> tuple[torch.Tensor, ...]:
+    """The gradient mask and the structure tensor of a working image, strip by strip.
+
+    The mask is the sigma_d-blurred indicator of a smoothed mask-gradient magnitude above its mean; the
+    structure tensor [[a, c], [c, b]] blurs (sigma_i) the products of the mask-weighted smoothed grey gradients.
+
+    Returns:
+        a, b, c: (h, w) float each; strong: (h, w) bool, mask > mask_threshold.
+    """
+    height, width = fields.shape(factor)
+    device = fields.image.device
+    r_d, r_i = _kernel_radius(sigma_d), _kernel_radius(sigma_i)
+
+    def margin(start: int, stop: int, extra: int) -> tuple[int, int]:
+        return max(0, start - extra), min(height, stop + extra)
+
+    magnitude = torch.empty(height, width, device=device)
+    for start, stop in strips:
+        lo, hi = margin(start, stop, r_d)
+        _, _, bx, by = fields.rows(factor, lo, hi)
+        torch.hypot(*_blurred_rows([bx, by], sigma_d, start, stop, lo), out=magnitude[start:stop])
+    mean = sum(_total(magnitude[start:stop]) for start, stop in strips) / (height * width)
+    above = magnitude > _float32(mean, device)
+    del magnitude
+    a, b, c = (torch.empty(height, width, device=device) for _ in range(3))
+    strong = torch.empty(height, width, dtype=torch.bool, device=device)
+    for start, stop in strips:
+        lo, hi = margin(start, stop, r_i)  # the rows whose gradients the integration blur reads
+        first, last = margin(lo, hi, r_d)
+        mask = _blurred_rows([above[first:last].to(a.dtype)], sigma_d, lo, hi, first)[0]
+        strong[start:stop] = mask[start - lo : stop - lo] > mask_threshold
+        gx, gy, *_ = fields.rows(factor, first, last, mask=False)
+        dx, dy = _blurred_rows([gx, gy], sigma_d, lo, hi, first)
+        dx.mul_(mask)
+        dy.mul_(mask)
+        del mask
+        for out, (p, q) in zip((a, b, c), ((dx, dx), (dy, dy), (dx, dy))):
+            out[start:stop] = _blurred_rows([p * q], sigma_i, start, stop, lo)[0]
+    return a, b, c, strong
+
+
+def _harris_statistics(a: torch.Tensor, b: torch.Tensor, c: torch.Tensor, strips: list[tuple[int, int]]
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard deviation of det and trace^2 of the structure tensor over the whole image, (2,) each
+    (two passes over the strips)."""
+    height, width = a.shape
+    sums = np.zeros(2)
+    for start, stop in strips:
+        sums += [_total(term) for term in _harris_terms(a, b, c, start, stop)]
+    means = sums / (height * width)
+    squares = np.zeros(2)
+    for start, stop in strips:
+        terms = _harris_terms(a, b, c, start, stop)
+        squares += [_total(term.sub_(_float32(mean, a.device)).square_()) for term, mean in zip(terms, means)]
+    return means, np.sqrt(squares / max(height * width - 1, 1))
+
+
+def _float32(value: float, device: torch.device) -> torch.Tensor:
+    return torch.tensor(value, dtype=torch.float32, device=device)
+
+
+def _harris_terms(a: torch.Tensor, b: torch.Tensor, c: torch.Tensor, start: int, stop: int
+                  ) -> tuple[torch.Tensor, torch.Tensor]:
+    """det = ab - c^2 and trace^2 = (a + b)^2 of the structure tensor's rows start..stop-1."""
+    a, b, c = a[start:stop], b[start:stop], c[start:stop]
+    return torch.addcmul(a * b, c, c, value=-1.0), (a + b).square_()
+
+
+def _zscored(x: torch.Tensor, mean: float, std: float) -> torch.Tensor:
+    """(x - mean) / std in x's memory (zeros when std = 0: a constant image)."""
+    centred = x.sub_(_float32(mean, x.device))
+    return centred.div_(_float32(std, x.device)) if std > 0 else centred.zero_()
+
+
 def _empty_level() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     return np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(0, np.int64)
 
 
-def _unique_peaks(
-    response: torch.Tensor, mask: torch.Tensor, window: int, mask_threshold: float
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Pixels that are the unique maximum of their window, with response > 0 and mask > threshold.
+def _unique_peaks(response: torch.Tensor, strong: torch.Tensor, window: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Pixels that are the unique maximum of their window, with response > 0 and ``strong`` (mask > threshold).
 
     Peaks whose window leaves the image are ignored. Returns row and column indices (int64, same device).
     """
@@ -370,7 +490,7 @@ def _unique_peaks(
     core = response[inner]
     candidate = core == _max_filter(response, window)[inner]
     candidate &= core > 0
-    candidate &= mask[inner] > mask_threshold
+    candidate &= strong[inner]
     ys, xs = torch.nonzero(candidate, as_tuple=True)
     ys, xs = ys + h, xs + h
     offsets = torch.arange(-h, h + 1, device=response.device)
