@@ -444,18 +444,17 @@ def _structure_tensor(
 
 def _harris_statistics(a: torch.Tensor, b: torch.Tensor, c: torch.Tensor, strips: list[tuple[int, int]]
                        ) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and standard deviation of det and trace^2 of the structure tensor over the whole image, (2,) each
-    (two passes over the strips)."""
-    height, width = a.shape
-    sums = np.zeros(2)
+    """Mean and standard deviation of det and trace^2 of the structure tensor over the whole image, (2,) each,
+    from their sums and sums of squares (|mean| < std on images: no cancellation to fear)."""
+    count = a.numel()
+    sums, squares = np.zeros(2), np.zeros(2)
     for start, stop in strips:
-        sums += [_total(term) for term in _harris_terms(a, b, c, start, stop)]
-    means = sums / (height * width)
-    squares = np.zeros(2)
-    for start, stop in strips:
-        terms = _harris_terms(a, b, c, start, stop)
-        squares += [_total(term.sub_(_float32(mean, a.device)).square_()) for term, mean in zip(terms, means)]
-    return means, np.sqrt(squares / max(height * width - 1, 1))
+        for i, term in enumerate(_harris_terms(a, b, c, start, stop)):
+            sums[i] += _total(term)
+            squares[i] += _total(term.square_())
+    means = sums / count
+    variances = np.maximum(squares - count * means**2, 0.0) / max(count - 1, 1)
+    return means, np.sqrt(variances)
 
 
 def _float32(value: float, device: torch.device) -> torch.Tensor:
