@@ -297,10 +297,10 @@ class _WorkingFields:
     The fields of the last range asked for are kept, so that the levels and passes that ask for the same
     range (all of them when the image is one strip) compute it once.
     """
-    # (factor, start, stop, with the mask gradient) and the fields
 
     def __init__(self, image: torch.Tensor, color: bool):
         self.image, self.color = image, color
+        # ((factor, start, stop, with the mask gradient), the fields) of the last range
         self._kept: tuple[tuple[int, int, int, bool], tuple[torch.Tensor, ...]] | None = None
 
     def shape(self, factor: int) -> tuple[int, int]:
@@ -308,8 +308,8 @@ class _WorkingFields:
         return factor * self.image.shape[1], factor * self.image.shape[2]
 
     def rows(self, factor: int, start: int, stop: int, mask: bool = True) -> tuple[torch.Tensor, ...]:
-        """gx, gy, bx, by (see :func:`_gradient_fields`; gx, gy first when ``mask`` is False) of working rows
-        start..stop-1, (stop - start, w) each, equal to those rows of the whole working image's fields."""
+        """gx, gy, bx, by (see :func:`_gradient_fields`; when ``mask`` is False, gx, gy and maybe bx, by) of
+        working rows start..stop-1, (stop - start, w) each, equal to those rows of the whole image's fields."""
         key = (factor, start, stop, mask)
         if self._kept is None or self._kept[0] not in (key, (factor, start, stop, True)):
             self._kept = None  # freed before the next range is computed
