@@ -127,7 +127,8 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
     Returns:
         One record per pair, in ``jobs`` order: names, folder, status ("done", "skipped" or "failed"),
         matches, seconds, for Slime the feature sets it used and how many of them came from the cache
-        (``feature_sets``, ``cached_feature_sets``) and, for failures, the error. The same list is written to ``output/pairs.json``.
+        (``feature_sets``, ``cached_feature_sets``) and, for failures, the error. The same list is written to
+        ``output/pairs.json``.
 
     Raises:
         ConfigError: ``workers`` < 1, or ``output`` holds a run with another configuration.
