@@ -418,12 +418,12 @@ def _structure_tensor(
         return max(0, start - extra), min(height, stop + extra)
 
     magnitude = torch.empty(height, width, device=device)
+    total = 0.0
     for start, stop in strips:
         lo, hi = margin(start, stop, r_d)
         _, _, bx, by = fields.rows(factor, lo, hi)
-        torch.hypot(*_blurred_rows([bx, by], sigma_d, start, stop, lo), out=magnitude[start:stop])
-    mean = sum(_total(magnitude[start:stop]) for start, stop in strips) / (height * width)
-    above = magnitude > _float32(mean, device)
+        total += _total(torch.hypot(*_blurred_rows([bx, by], sigma_d, start, stop, lo), out=magnitude[start:stop]))
+    above = magnitude > _float32(total / (height * width), device)
     del magnitude
     a, b, c = (torch.empty(height, width, device=device) for _ in range(3))
     strong = torch.empty(height, width, dtype=torch.bool, device=device)
