@@ -55,13 +55,30 @@ def test_slime_precision_and_failures_match_base_on_planar_pairs(planar_rows):
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=(
-    "known unmet bar (issue 3): our base Hz+ already covers 0.562 on these pairs and its HarrisZ+ keypoints with a "
-    "detected true partner bound any matcher at 0.732, so 1.2x (0.674) is out of reach here; Slime is 1.055x"))
+    "known unmet bar (issue 3): our base Hz+ (6x patches) already covers 0.562 on these pairs and its HarrisZ+ "
+    "keypoints with a detected true partner bound any matcher at 0.732, so 1.2x (0.674) is out of reach here; Slime "
+    "is 1.055x (against a base with 2x patches it is 1.27x, tested below)"))
 def test_slime_coverage_beats_base_on_planar_pairs(planar_rows):
     cov_s = np.mean([s["coverage"] for s, _ in planar_rows])
     cov_b = np.mean([b["coverage"] for _, b in planar_rows])
     print(f"coverage {cov_s:.4f} vs {cov_b:.4f}")
     assert cov_s >= 1.2 * cov_b
+
+
+@pytest.mark.slow
+def test_slime_coverage_beats_a_base_at_magnification_2_on_planar_pairs():
+    """Slime's gain is relative to its base: with patches at 2x the HarrisZ+ ellipse (our default is 6x, the
+    reference pipelines used 1x) Hz+ covers 0.451 at precision 0.928 and Slime on it 0.571 at 0.973 (1.27x;
+    42015fd), the paper's bar met with the same base on both sides."""
+    slime = Matcher(make_config("slime", descriptor="tfeat", magnification=2))
+    base = Matcher(make_config("hz+", descriptor="tfeat", magnification=2))
+    rows = [(_evaluate(slime, *p), _evaluate(base, *p)) for p in PLANAR]
+    cov_s, cov_b = (np.mean([r[k]["coverage"] for r in rows]) for k in (0, 1))
+    prec_s, prec_b = (np.mean([r[k]["precision"] for r in rows]) for k in (0, 1))
+    print(f"coverage {cov_s:.4f} vs {cov_b:.4f}, precision {prec_s:.4f} vs {prec_b:.4f}")
+    assert cov_s >= 1.2 * cov_b
+    assert prec_s >= prec_b - 0.02
+    assert sum(s["correct"] == 0 for s, _ in rows) <= sum(b["correct"] == 0 for _, b in rows)
 
 
 @pytest.mark.slow

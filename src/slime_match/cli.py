@@ -40,7 +40,9 @@ def _add_match_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-side", type=int, default=None, metavar="PX",
                         help="shrink images whose longest side is larger to this many px before matching "
                              "(matches come back in original pixels); faster and lighter on large photos")
-    parser.add_argument("--magnification", type=float, default=None, help="patch magnification over regions")
+    parser.add_argument("--magnification", type=float, default=None,
+                        help="patch size over the detected region (default 6 over HarrisZ+ ellipses, 1 over "
+                             "Key.Net frames); smaller patches give a weaker base (docs/coverage.md)")
     parser.add_argument("--scales", type=parse_scales, default=None,
                         help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper; "
                              "1,2 is about 2.5x faster, 1,2,3,4 covers more at about 2.5x the time; see the README)")
