@@ -39,6 +39,7 @@ _SQRT2 = math.sqrt(2.0)
 _GREY_WEIGHTS = (0.299, 0.587, 0.114)
 WHOLE_PIXELS = 8_000_000  # a working image up to this many pixels (a 2 MP photo's 2x levels) is filtered whole,
 STRIP_PIXELS = 3_000_000  # a larger one in strips of at most this many
+_PEAK_STEPS = ((0, 0), (0, -1), (0, 1), (-1, 0), (1, 0))  # (dy, dx): a peak and its 4 neighbours (parabola fits)
 
 
 @dataclass
@@ -372,8 +373,7 @@ def _detect_level(
         det, trace2 = _harris_terms(a, b, c, lo, hi)
         response = _zscored(det, means[0], stds[0]).sub_(_zscored(trace2, means[1], stds[1]))
         ys, xs = _unique_peaks(response, strong[lo:hi], cfg.peak_window)
-        steps = ((0, 0), (0, -1), (0, 1), (-1, 0), (1, 0))  # the peak and its 4 neighbours (parabola fits)
-        samples = [response[ys + dy, xs + dx] for dy, dx in steps] + [t[ys + lo, xs] for t in (a, b, c)]
+        samples = [response[ys + dy, xs + dx] for dy, dx in _PEAK_STEPS] + [t[ys + lo, xs] for t in (a, b, c)]
         peaks.append((torch.stack(samples, dim=1).double().cpu().numpy(),
                       torch.stack((xs, ys + lo), dim=1).cpu().numpy().astype(np.float64)))
     values, peaks_xy = (np.concatenate(p) for p in zip(*peaks))
