@@ -82,3 +82,13 @@ def test_bad_cache_budgets(tmp_path, capsys, pair):
     code, _, err = run_cli(capsys, "pairs", tmp_path / "pairs.txt", "-o", tmp_path / "run", "--feature-cache-mb",
                            "-5", "--method", "slime", "--scales", "1")
     assert code == 2 and "feature_cache_mb must be >= 0" in err and not (tmp_path / "run").exists()
+
+
+def test_a_self_pair_counts_its_second_image_as_reused(pair):
+    """Both images the same picture: its blocks and tiles are computed once and the other two requests are
+    copies, so computed = feature_sets - cached_feature_sets holds as for any pair."""
+    left, right = load_image(pair[0]), load_image(pair[1])
+    matcher = Matcher(make_config("slime", **WEIGHT_FREE_SMALL))
+    counts = [matcher(a, b).summary["counts"] for a, b in ((left, left), (left, right))]
+    assert [(c["feature_sets"], c["cached_feature_sets"]) for c in counts] == [(4, 2), (4, 2)]
+    assert (matcher.level_cache.misses, matcher.level_cache.hits) == (4, 2)

@@ -307,7 +307,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
 def _levels(pipeline: BasePipeline, requests: list[LevelRequest], workers: int, cache: LevelCache | None
             ) -> tuple[list[list[ScaleLevel]], int]:
     """``build_levels_many`` on the requests that ``cache`` cannot answer (each distinct one once), and how
-    many distinct requests the cache answered."""
+    many requests were not computed: answered by the cache, or a repeat of an earlier request of this pair
+    (a self-pair's second image), so that computed = ``len(requests)`` minus it."""
     if cache is None:
         return build_levels_many(pipeline, requests, workers), 0
     digests: dict[int, str] = {}
@@ -321,9 +322,9 @@ def _levels(pipeline: BasePipeline, requests: list[LevelRequest], workers: int, 
     for key, levels in zip(missing, fresh):
         cache.put(key, levels)
         found[key] = levels
-    reused = len(found) - len(missing)
-    logger.info("Slime features: %d of %d feature sets (the blocks, the tiles of each image) from the cache",
-                reused, len(found))
+    reused = len(keys) - len(missing)
+    logger.info("Slime features: %d of %d feature sets (the blocks, the tiles of each image) reused",
+                reused, len(keys))
     return [found[key] if first[key] == k else fresh_copy(found[key]) for k, key in enumerate(keys)], reused
 
 
