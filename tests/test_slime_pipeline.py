@@ -28,7 +28,7 @@ from slime_match.slime.pipeline import (
     layout_warning,
     tile_count_warning,
 )
-from slime_match.slime.refine import FlowGuide, cluster_representatives, global_dtm
+from slime_match.slime.refine import FlowGuide, PlaneGuide, cluster_representatives, global_dtm, tile_test
 from slime_match.slime.tiles import TileConfig
 
 WEIGHT_FREE = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift"}
@@ -81,6 +81,41 @@ def test_flow_guide_equals_brute_force():
     assert expected.sum() > 50
     assert np.array_equal(guide(y0, y1, neighbours=200), expected)
     assert FlowGuide(np.zeros((0, 2)), np.zeros((0, 2)), 15.0)(y0, y1).sum() == 0
+
+
+def test_plane_guide_keeps_what_fits_one_of_the_given_planes():
+    """Candidates within t of a plane (two-sided), on its side, pass for that plane only; the other plane of the
+    pair, or a plane not given, does not let them through."""
+    shift = np.array([[1.0, 0.0, 40.0], [0.0, 1.0, -20.0], [0.0, 0.0, 1.0]])
+    zoom = np.array([[2.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.0]])
+    flipped = -shift  # the same mapping with w < 0 on every point: the other side of that plane
+    guide = PlaneGuide(np.stack([shift, zoom, flipped]), np.array([1.0, 1.0, 1.0]), 15.0)
+    y0 = np.array([[100.0, 100.0], [100.0, 100.0], [100.0, 100.0], [50.0, 60.0]])
+    y1 = np.array([[150.0, 80.0], [155.0, 80.0], [201.0, 207.0], [90.0, 40.0]])  # errors under shift: 10, 15, .., 0
+    assert guide(y0, y1, np.array([0])).tolist() == [True, False, False, True]
+    assert guide(y0, y1, np.array([1])).tolist() == [False, False, True, False]  # zoom: (200, 200) vs (201, 207)
+    assert guide(y0, y1, np.array([0, 1])).tolist() == [True, False, True, True]
+    assert guide(y0, y1, np.array([2])).tolist() == [False] * 4
+    assert guide(y0, y1, np.array([], np.int64)).tolist() == [False] * 4
+    assert guide(y0[:0], y1[:0], np.array([0])).shape == (0,)
+
+
+def test_tile_tests_combine_flow_and_plane():
+    """"flow" ignores the planes, "plane" ignores the flows, "either" keeps what one of them keeps."""
+    flow = FlowGuide(np.array([[0.0, 0.0]]), np.array([[500.0, 500.0]]), 15.0)
+    plane = PlaneGuide(np.eye(3)[None], np.ones(1), 15.0)
+    y0 = np.array([[5.0, 0.0], [300.0, 300.0], [700.0, 0.0]])
+    y1 = np.array([[505.0, 500.0], [305.0, 300.0], [0.0, 700.0]])
+    planes = np.array([0])
+    assert tile_test("flow", flow, plane)(y0, y1, planes).tolist() == [True, False, False]
+    assert tile_test("plane", flow, plane)(y0, y1, planes).tolist() == [False, True, False]
+    assert tile_test("either", flow, plane)(y0, y1, planes).tolist() == [True, True, False]
+    with pytest.raises(ValueError, match="tile test 'nearest'"):
+        tile_test("nearest", flow, plane)
+    with pytest.raises(ConfigError, match="invalid tile_test 'nearest'"):
+        make_config("slime", tile_test="nearest")
+    with pytest.raises(ConfigError, match="Slime option"):
+        make_config("hz+", tile_test="plane")
 
 
 def test_global_dtm_merges_exact_duplicates():

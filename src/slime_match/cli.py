@@ -15,7 +15,7 @@ logger = logging.getLogger("slime_match")
 
 
 def _add_match_options(parser: argparse.ArgumentParser) -> None:
-    from .config import DETECTIONS, RANSAC_CHOICES
+    from .config import DETECTIONS, RANSAC_CHOICES, TILE_TESTS
 
     parser.add_argument("--method", default="slime", choices=["slime", "hz+", "rootsift", "keynet"],
                         help="Slime (default) or a base pipeline alone")
@@ -51,6 +51,10 @@ def _add_match_options(parser: argparse.ArgumentParser) -> None:
                              "crop on its own and describes shared keypoints once, 'block' also describes per "
                              "crop (the paper's prototype, slower), 'scale' detects once per block scale "
                              "(fastest, the RootSIFT and Key.Net default; fewer matches in low-texture scenes)")
+    parser.add_argument("--tile-test", default=None, choices=TILE_TESTS,
+                        help="Slime: which full-resolution tile matches to keep: 'flow' (the paper's default: "
+                             "near a match of the selected planes), 'plane' (fits the plane's homography over "
+                             "the whole tile pair: more coverage, docs/coverage.md), 'either'")
 
 
 def _add_workers_option(parser: argparse.ArgumentParser) -> None:
@@ -83,7 +87,7 @@ def parse_scales(text: str) -> tuple[int, ...]:
 
 def _options(args: argparse.Namespace) -> dict:
     keys = ("base", "descriptor", "shape", "orientation", "upright", "ransac", "threshold", "seed", "device",
-            "weights_dir", "magnification", "scales", "detection", "max_side")
+            "weights_dir", "magnification", "scales", "detection", "tile_test", "max_side")
     return {key: getattr(args, key) for key in keys} | {"workers": getattr(args, "slime_workers", None)}
 
 

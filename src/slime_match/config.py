@@ -13,6 +13,7 @@ from .io import MIN_IMAGE_SIDE
 from .pipelines import BASE_NAMES, PIPELINES, BaseConfig
 from .slime.block_matching import DETECTIONS
 from .slime.pipeline import SlimeConfig
+from .slime.refine import TILE_TESTS
 
 METHODS = ("slime", "hz+", "rootsift", "keynet")
 RANSAC_CHOICES = ("none", "homography", "fundamental", "magsac-homography", "magsac-fundamental",
@@ -69,6 +70,7 @@ class MatchConfig:
             if value == "merged" and PIPELINES[self.base.name].slime_detection != "merged":
                 raise ConfigError(f"{name} 'merged' needs the hz+ base (a detector apart from the descriptor); "
                                   f"the {self.base.name} base takes 'scale' or 'block'")
+        _choice("tile_test", self.slime.tile_test, TILE_TESTS)
         return self
 
     def to_dict(self) -> dict[str, Any]:

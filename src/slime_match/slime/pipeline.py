@@ -33,7 +33,7 @@ from .blocks import Block, BlockConfig, make_blocks, make_tiles
 from .forking import torch_threads
 from .level_cache import LevelCache, fresh_copy, request_key
 from .planes import MatchTable, PlaneConfig, deduplicate, expand_planes
-from .refine import FlowGuide, global_dtm, match_tiles, merge_duplicates
+from .refine import FlowGuide, PlaneGuide, global_dtm, match_tiles, merge_duplicates, tile_test
 from .tiles import (
     TileConfig,
     TileSets,
@@ -78,6 +78,10 @@ class SlimeConfig:
             block crop on its own but describes the keypoints shared by overlapping blocks once; None: the
             base pipeline's ``slime_detection`` ("merged" for Hz+, "scale" for RootSIFT and Key.Net).
         tile_detection: the same choice for the full-resolution tiles of Sec. 3.8 ("scale" by default).
+        tile_test: which tile candidates Sec. 3.8 keeps (``refine.TILE_TESTS``): "flow", the paper's (a match
+            of F^theta within t_perp at both ends); "plane" (within t_perp of the plane homography of one of
+            the tile pair's F^theta sets, on its side: the whole tile pair where the plane holds, not only
+            near the block matches; ours); "either".
     """
 
     blocks: BlockConfig = field(default_factory=BlockConfig)
@@ -92,6 +96,7 @@ class SlimeConfig:
     keep_stages: bool = False
     detection: str | None = None
     tile_detection: str = "scale"
+    tile_test: str = "flow"
 
 
 @dataclass
@@ -276,10 +281,11 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     tile_levels0, tile_levels1 = tile_levels or ([], [])
     if config.refine_tiles and len(ftheta):
         with timer("tile_refinement"), torch_threads(1):
-            guide = FlowGuide(guide_xy0, guide_xy1, config.planes.t_perp)
+            test = tile_test(config.tile_test, FlowGuide(guide_xy0, guide_xy1, config.planes.t_perp),
+                             PlaneGuide(h, side, config.planes.t_perp))
             tile_xy0, tile_xy1, tile_scores = match_tiles(
                 pipeline, tile_levels0, tile_levels1, tiles0, tiles1, np.stack([ftheta.tile0, ftheta.tile1], 1),
-                selected["theta"], guide, bins=config.tiles.bins, workers=workers)
+                selected["theta"], ftheta.plane, test, bins=config.tiles.bins, workers=workers)
     counts["tile_matches"] = len(tile_xy0)
     with timer("global_dtm"):
         all0 = np.vstack([guide_xy0, tile_xy0])

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..geometry.homography import two_sided_error_batch
 from ..matching.dtm import DTMConfig, dtm_filter
 from ..pipelines import BasePipeline
 from .block_matching import (
@@ -51,6 +53,51 @@ class FlowGuide:
         return (valid & (np.maximum(e0, e1) < self.threshold)).any(axis=1)
 
 
+@dataclass
+class PlaneGuide:
+    """The planes of F^theta's sets, to test the candidates of their tile pairs against (``tile_test="plane"``).
+
+    A candidate (y, y') is kept when, for the plane H_l of some set on its tile pair, the two-sided error
+    ``max(|y' - H_l y|, |y - H_l^-1 y'|)`` is below ``threshold`` and y lies on the plane's side: the tests of
+    Sec. 3.4's expansion, where the paper's flow test asks for a F^theta match within ``threshold``.
+
+    Attributes:
+        homographies: (P, 3, 3) plane homographies (image 0 -> image 1, px); sides: (P,) +-1 sign of w on
+        the plane's own matches; threshold: t_perp in px.
+    """
+
+    homographies: np.ndarray
+    sides: np.ndarray
+    threshold: float
+
+    def __call__(self, y0: np.ndarray, y1: np.ndarray, planes: np.ndarray) -> np.ndarray:
+        """(K,) bool: candidates (K, 2) <-> (K, 2) that fit one of ``planes`` (indices into homographies)."""
+        if len(planes) == 0 or len(y0) == 0:
+            return np.zeros(len(y0), bool)
+        error, w = two_sided_error_batch(self.homographies[planes], y0, y1)
+        return ((error < self.threshold) & (np.sign(w) == self.sides[planes][:, None])).any(axis=0)
+
+
+TILE_TESTS = ("flow", "plane", "either")  # Sec. 3.8's test; "flow" is the paper's
+
+
+def tile_test(kind: str, flow: FlowGuide, plane: PlaneGuide
+              ) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    """The candidate test of the tile stage: ``test(y0, y1, planes) -> (K,) bool`` for candidates (K, 2) <->
+    (K, 2) in original px of a tile pair whose F^theta sets have the planes ``planes``.
+
+    "flow": the paper's (a F^theta match within t_perp at both ends, ``FlowGuide``); "plane": fits the plane
+    of one of the tile pair's sets (``PlaneGuide``); "either": passes one of the two.
+    """
+    if kind == "flow":
+        return lambda y0, y1, planes: flow(y0, y1)
+    if kind == "plane":
+        return plane
+    if kind == "either":
+        return lambda y0, y1, planes: flow(y0, y1) | plane(y0, y1, planes)
+    raise ValueError(f"tile test {kind!r} is not one of {', '.join(TILE_TESTS)}")
+
+
 def match_tiles(
     pipeline: BasePipeline,
     levels0: list[ScaleLevel],
@@ -59,7 +106,8 @@ def match_tiles(
     tiles1: list[Block],
     tile_pairs: np.ndarray,
     thetas: np.ndarray,
-    guide: FlowGuide,
+    planes: np.ndarray,
+    test: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
     bins: int = 16,
     workers: int = 1,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -70,7 +118,9 @@ def match_tiles(
         tiles0, tiles1: the tiles of each image.
         tile_pairs: (S, 2) tile indices (c, c') of each set of F^theta.
         thetas: (S,) the set's relative orientation theta^l_v (radians): theta = 0 in image 0, theta in 1.
-        guide: the flow filter applied to the candidates before DTM.
+        planes: (S,) the set's plane (block pair) index l.
+        test: ``tile_test``'s filter of the candidates before DTM, given a tile pair's candidates in original
+            px and the planes of its sets.
         workers: forked processes for the descriptors and the tile pairs (``fork_map``; same results).
 
     Returns:
@@ -78,8 +128,10 @@ def match_tiles(
     """
     where0 = {c: (level, i) for level in levels0 for i, c in enumerate(level.blocks)}
     where1 = {c: (level, i) for level in levels1 for i, c in enumerate(level.blocks)}
-    jobs = sorted({(c0, c1, orientation_bin(theta, bins))
-                   for (c0, c1), theta in zip(tile_pairs.tolist(), thetas.tolist())})
+    job_planes: dict[tuple[int, int, int], set[int]] = {}
+    for (c0, c1), theta, plane in zip(tile_pairs.tolist(), thetas.tolist(), planes.tolist()):
+        job_planes.setdefault((c0, c1, orientation_bin(theta, bins)), set()).add(plane)
+    jobs = sorted(job_planes)
     requests: dict[int, tuple[ScaleLevel, dict[int, list]]] = {}
     for c0, c1, b in jobs:
         for (level, i), bin_index in ((where0[c0], 0), (where1[c1], b)):
@@ -93,7 +145,8 @@ def match_tiles(
         offset0, offset1 = np.array(tiles0[c0].box[:2]), np.array(tiles1[c1].box[:2])
         f0 = fixed_features(level0, level0.members[i0], 0, bins)
         f1 = fixed_features(level1, level1.members[i1], b, bins)
-        return f0, f1, tiles0[c0], tiles1[c1], lambda y0, y1: guide(y0 + offset0, y1 + offset1)
+        job_plane = np.array(sorted(job_planes[jobs[k]]), dtype=np.int64)
+        return f0, f1, tiles0[c0], tiles1[c1], lambda y0, y1: test(y0 + offset0, y1 + offset1, job_plane)
 
     found = [(xy0, xy1, m.scores) for m, xy0, xy1 in match_jobs(pipeline, len(jobs), job, workers) if len(m)]
     out0, out1, scores = (list(column) for column in zip(*found)) if found else ([], [], [])
