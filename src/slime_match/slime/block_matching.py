@@ -353,7 +353,9 @@ def describe_fixed_bins(pipeline: BasePipeline, requests: list[tuple[ScaleLevel,
         fresh = pipeline.describe_fixed(level.context, regions, bin_index * 2 * math.pi / bins).descriptors
         return fresh.detach().cpu().numpy() if forked else fresh.detach()  # no device round trip in-process
 
-    for (level, bin_index, missing), fresh in zip(tasks, fork_map(describe, len(tasks), workers)):
+    with torch_threads(1):  # as in a worker: the same float rounding for any number of workers
+        described = fork_map(describe, len(tasks), workers)
+    for (level, bin_index, missing), fresh in zip(tasks, described):
         n, device = len(level.features), level.features.laf.device
         computed, descriptors = level.fixed.get(bin_index, (np.zeros(n, bool), None))
         if descriptors is None:
