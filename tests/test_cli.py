@@ -77,6 +77,15 @@ def test_slime_detection_option(pair, tmp_path, capsys):
     assert code == 2 and "'merged' needs the hz+ base" in err
 
 
+def test_slime_tile_test_option(pair, tmp_path, capsys):
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--tile-test", "plane", "--no-plot")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["config"]["slime"]["tile_test"] == "plane" and summary["counts"]["tile_matches"] > 0
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "r", "--method", "hz+", "--tile-test", "plane")
+    assert code == 2 and "'tile_test' is a Slime option" in err and not (tmp_path / "r").exists()
+
+
 def test_blank_image_gives_explicit_empty_result(pair, tmp_path, capsys, caplog):
     blank = tmp_path / "blank.png"
     cv2.imwrite(str(blank), np.full((200, 300, 3), 128, np.uint8))
