@@ -54,7 +54,7 @@ def _add_match_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tile-test", default=None, choices=TILE_TESTS,
                         help="Slime: which full-resolution tile matches to keep: 'flow' (the paper's default: "
                              "near a match of the selected planes), 'plane' (fits the plane's homography over "
-                             "the whole tile pair: more coverage, docs/coverage.md), 'either'")
+                             "the whole tile pair: more coverage, docs/coverage.md)")
 
 
 def _add_workers_option(parser: argparse.ArgumentParser) -> None:

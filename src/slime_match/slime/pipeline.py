@@ -81,7 +81,7 @@ class SlimeConfig:
         tile_test: which tile candidates Sec. 3.8 keeps (``refine.TILE_TESTS``): "flow", the paper's (a match
             of F^theta within t_perp at both ends); "plane" (within t_perp of the plane homography of one of
             the tile pair's F^theta sets, on its side: the whole tile pair where the plane holds, not only
-            near the block matches; ours); "either".
+            near the block matches; ours).
     """
 
     blocks: BlockConfig = field(default_factory=BlockConfig)
