@@ -37,6 +37,15 @@ def test_fork_map_equals_the_serial_map(count, workers):
     assert _gone({pid for _, pid in out} - {CALLER})
 
 
+@pytest.mark.parametrize("workers", [1, 3])
+def test_every_call_runs_with_one_torch_thread_and_the_caller_gets_its_own_back(workers):
+    """Single-threaded torch in every process, with or without forks (the same float rounding for any number
+    of workers: convolutions differ in the last bits between thread counts on some CPUs)."""
+    before = torch.get_num_threads()
+    assert fork_map(lambda k: torch.get_num_threads(), 6, workers) == [1] * 6
+    assert torch.get_num_threads() == before
+
+
 def test_the_caller_and_its_children_all_compute_and_get_tensors_back():
     threads = torch.get_num_threads()
 

@@ -197,8 +197,7 @@ def build_levels_many(pipeline: BasePipeline, requests: list[LevelRequest], work
             features = pipeline.detect_regions(d.context) if regions_only else pipeline.detect(d.context)
         return _features_to_numpy(features) if forked else features
 
-    with torch_threads(1):  # as in a worker: the same float rounding for any number of workers
-        found = fork_map(detect, len(pieces), describers)
+    found = fork_map(detect, len(pieces), describers)
     parts: list[list] = [[] for _ in detections]
     for (k, piece), result in sorted(zip(pieces, found), key=lambda done: (done[0][0], done[0][1].start)):
         parts[k].append(result)
@@ -353,9 +352,7 @@ def describe_fixed_bins(pipeline: BasePipeline, requests: list[tuple[ScaleLevel,
         fresh = pipeline.describe_fixed(level.context, regions, bin_index * 2 * math.pi / bins).descriptors
         return fresh.detach().cpu().numpy() if forked else fresh.detach()  # no device round trip in-process
 
-    with torch_threads(1):  # as in a worker: the same float rounding for any number of workers
-        described = fork_map(describe, len(tasks), workers)
-    for (level, bin_index, missing), fresh in zip(tasks, described):
+    for (level, bin_index, missing), fresh in zip(tasks, fork_map(describe, len(tasks), workers)):
         n, device = len(level.features), level.features.laf.device
         computed, descriptors = level.fixed.get(bin_index, (np.zeros(n, bool), None))
         if descriptors is None:

@@ -63,7 +63,8 @@ def fork_map(fn: Callable[[int], Any], count: int, workers: int) -> list:
     """
     size = min(workers, count)
     if size <= 1 or "fork" not in multiprocessing.get_all_start_methods():
-        return [fn(k) for k in range(count)]
+        with torch_threads(1):  # as every process below: the same float rounding for any number of workers
+            return [fn(k) for k in range(count)]
     context = multiprocessing.get_context("fork")
     taken = context.Value("l", 0)  # calls handed out so far, in memory shared by the forks
 
