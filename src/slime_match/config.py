@@ -11,7 +11,7 @@ from typing import Any
 from .errors import ConfigError
 from .io import MIN_IMAGE_SIDE
 from .pipelines import BASE_NAMES, PIPELINES, BaseConfig
-from .slime.block_matching import DETECTIONS
+from .slime.levels import DETECTIONS
 from .slime.pipeline import SlimeConfig
 from .slime.refine import TILE_TESTS
 

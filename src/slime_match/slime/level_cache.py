@@ -3,21 +3,25 @@
 Slime's features stage (Secs. 3.1 and 3.8: every block scale and the tiles, detected and described) depends
 on one image only, so in a batch of pairs (``slime pairs``, a loop over a Matcher) an image met again need
 not be detected again. The cache keeps them per image content, least recently used first out, within a
-byte budget. Each use gets its own empty fixed-orientation cache (``ScaleLevel.fixed``), which a pair fills
-as it goes: the matches are the same as without the cache.
+byte budget. Levels are never changed once built, so a cached level serves any later pair: the matches are
+the same as without the cache.
 """
 
 from __future__ import annotations
 
 import hashlib
+import logging
 from collections import OrderedDict
-from dataclasses import fields, is_dataclass, replace
+from dataclasses import dataclass, fields, is_dataclass
 from typing import Any
 
 import numpy as np
 import torch
 
-from .block_matching import LevelRequest, ScaleLevel
+from ..pipelines import BasePipeline
+from .levels import LevelRequest, ScaleLevel, build_levels_many
+
+logger = logging.getLogger("slime_match")
 
 
 def request_key(request: LevelRequest, digests: dict[int, str] | None = None) -> tuple:
@@ -60,11 +64,6 @@ def nbytes(obj: Any) -> int:
     return walk(obj)
 
 
-def fresh_copy(levels: list[ScaleLevel]) -> list[ScaleLevel]:
-    """The levels with empty fixed-orientation caches (the features and contexts are shared, never changed)."""
-    return [replace(level, fixed={}) for level in levels]
-
-
 class LevelCache:
     """Levels (``build_levels_many`` outputs) by request, least recently used evicted beyond ``budget_bytes``.
 
@@ -92,21 +91,57 @@ class LevelCache:
         return len({key[0] for key in self._entries})
 
     def get(self, key: tuple) -> list[ScaleLevel] | None:
-        """The levels stored under ``key`` (with empty fixed-orientation caches), or None."""
+        """The levels stored under ``key``, or None."""
         entry = self._entries.get(key)
         if entry is None:
             self.misses += 1
             return None
         self.hits += 1
         self._entries.move_to_end(key)
-        return fresh_copy(entry[0])
+        return entry[0]
 
     def put(self, key: tuple, levels: list[ScaleLevel]) -> None:
-        """Store levels as they are now (call before a pair fills their fixed-orientation caches)."""
+        """Store levels (evicting the least recently used beyond the budget; a set larger than it is not kept)."""
         size = nbytes(levels)
         self._entries.pop(key, None)
         if size > self.budget_bytes:
             return
-        self._entries[key] = (fresh_copy(levels), size)
+        self._entries[key] = (levels, size)
         while self.size_bytes > self.budget_bytes:
             self._entries.popitem(last=False)
+
+
+@dataclass
+class FeatureLevels:
+    """The features stage's output: per request, its levels (``build_levels_many``), and how many requests were
+    not computed (answered by the cache, or a repeat of an earlier request of this pair)."""
+
+    levels: list[list[ScaleLevel]]
+    reused: int
+
+    @property
+    def counts(self) -> dict[str, int]:
+        return {"feature_sets": len(self.levels), "cached_feature_sets": self.reused}
+
+
+def feature_levels(pipeline: BasePipeline, requests: list[LevelRequest], workers: int, cache: LevelCache | None
+                   ) -> FeatureLevels:
+    """``build_levels_many`` on the requests that ``cache`` cannot answer (each distinct one once, so that
+    computed = ``len(requests)`` minus the reused ones, a self-pair's second image included)."""
+    if cache is None:
+        return FeatureLevels(build_levels_many(pipeline, requests, workers), 0)
+    digests: dict[int, str] = {}
+    keys = [request_key(request, digests) for request in requests]
+    first: dict[tuple, int] = {}  # each distinct request, at its first place, in request order
+    for k, key in enumerate(keys):
+        first.setdefault(key, k)
+    found = {key: cache.get(key) for key in first}
+    missing = [key for key, levels in found.items() if levels is None]
+    fresh = build_levels_many(pipeline, [requests[first[key]] for key in missing], workers) if missing else []
+    for key, levels in zip(missing, fresh):
+        cache.put(key, levels)
+        found[key] = levels
+    reused = len(keys) - len(missing)
+    logger.info("Slime features: %d of %d feature sets (the blocks, the tiles of each image) reused",
+                reused, len(keys))
+    return FeatureLevels([found[key] for key in keys], reused)

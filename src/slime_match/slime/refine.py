@@ -12,16 +12,12 @@ from scipy.spatial import cKDTree
 from ..geometry.homography import two_sided_error_batch
 from ..matching.dtm import DTMConfig, dtm_filter
 from ..pipelines import BasePipeline
-from .block_matching import (
-    MatchJob,
-    ScaleLevel,
-    describe_fixed_bins,
-    fixed_features,
-    match_jobs,
-    orientation_bin,
-)
 from .blocks import Block
 from .clusters import greedy_clusters
+from .fixed_descriptors import FixedDescriptors
+from .jobs import MatchJob, match_jobs
+from .levels import ScaleLevel
+from .orientations import orientation_bin
 
 
 @dataclass
@@ -97,6 +93,47 @@ def tile_test(kind: str, flow: FlowGuide, plane: PlaneGuide
     raise ValueError(f"tile test {kind!r} is not one of {', '.join(TILE_TESTS)}")
 
 
+@dataclass
+class TileMatches:
+    """Sec. 3.8's tile matches: xy0, xy1 (T, 2) in original px and scores (T,)."""
+
+    xy0: np.ndarray
+    xy1: np.ndarray
+    scores: np.ndarray
+
+    @classmethod
+    def empty(cls) -> TileMatches:
+        return cls(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
+
+    @property
+    def counts(self) -> dict[str, int]:
+        return {"tile_matches": len(self.xy0)}
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {"tile_matches_xy0": self.xy0, "tile_matches_xy1": self.xy1}
+
+
+@dataclass
+class FinalMatches:
+    """Slime's output matches (K, 2), (K, 2), (K,) in original px sorted by score, and the last step's input:
+    F^theta's matches then the tile matches (the global DTM's input where it runs)."""
+
+    xy0: np.ndarray
+    xy1: np.ndarray
+    scores: np.ndarray
+    input_xy0: np.ndarray
+    input_xy1: np.ndarray
+    input_scores: np.ndarray
+
+    @property
+    def counts(self) -> dict[str, int]:
+        return {"final": len(self.xy0)}
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {"dtm_input_xy0": self.input_xy0, "dtm_input_xy1": self.input_xy1,
+                "dtm_input_score": self.input_scores, "final_xy0": self.xy0, "final_xy1": self.xy1}
+
+
 def match_tiles(
     pipeline: BasePipeline,
     levels0: list[ScaleLevel],
@@ -109,7 +146,7 @@ def match_tiles(
     test: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
     bins: int = 16,
     workers: int = 1,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> TileMatches:
     """Base pipeline (no RANSAC) on the tile pairs of F^theta with the plane's fixed orientation.
 
     Args:
@@ -123,7 +160,7 @@ def match_tiles(
         workers: forked processes for the descriptors and the tile pairs (``fork_map``; same results).
 
     Returns:
-        xy0, xy1 (T, 2) and scores (T,) of the tile matches, in original pixels.
+        The tile matches, in original pixels.
     """
     where0 = {c: (level, i) for level in levels0 for i, c in enumerate(level.blocks)}
     where1 = {c: (level, i) for level in levels1 for i, c in enumerate(level.blocks)}
@@ -135,24 +172,25 @@ def match_tiles(
     for c0, c1, b in jobs:
         for (level, i), bin_index in ((where0[c0], 0), (where1[c1], b)):
             requests.setdefault(id(level), (level, {}))[1].setdefault(bin_index, []).append(level.members[i])
-    describe_fixed_bins(pipeline, [(level, {b: np.concatenate(parts) for b, parts in wanted.items()})
-                                   for level, wanted in requests.values()], bins, workers)
+    fixed = FixedDescriptors(pipeline, bins, workers)
+    fixed.compute([(level, {b: np.concatenate(parts) for b, parts in wanted.items()})
+                   for level, wanted in requests.values()])
 
     def job(k: int) -> MatchJob:
         c0, c1, b = jobs[k]
         (level0, i0), (level1, i1) = where0[c0], where1[c1]
         offset0, offset1 = np.array(tiles0[c0].box[:2]), np.array(tiles1[c1].box[:2])
-        f0 = fixed_features(level0, level0.members[i0], 0, bins)
-        f1 = fixed_features(level1, level1.members[i1], b, bins)
+        f0 = fixed.features(level0, level0.members[i0], 0)
+        f1 = fixed.features(level1, level1.members[i1], b)
         job_plane = np.array(sorted(job_planes[jobs[k]]), dtype=np.int64)
         return f0, f1, tiles0[c0], tiles1[c1], lambda y0, y1: test(y0 + offset0, y1 + offset1, job_plane)
 
     found = [(xy0, xy1, m.scores) for m, xy0, xy1 in match_jobs(pipeline, len(jobs), job, workers) if len(m)]
     out0, out1, scores = (list(column) for column in zip(*found)) if found else ([], [], [])
     if not out0:
-        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)
-    return (np.concatenate(out0).astype(np.float64), np.concatenate(out1).astype(np.float64),
-            np.concatenate(scores))
+        return TileMatches.empty()
+    return TileMatches(np.concatenate(out0).astype(np.float64), np.concatenate(out1).astype(np.float64),
+                       np.concatenate(scores))
 
 
 def merge_duplicates(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray) -> tuple[np.ndarray, np.ndarray,
@@ -217,3 +255,24 @@ def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size
     keep = dtm_filter(xy0[rep], xy1[rep], scores[rep], size0, size1, config=config).keep[cluster]
     order = np.argsort(scores[keep], kind="stable")
     return xy0[keep][order], xy1[keep][order], scores[keep][order]
+
+
+def final_matches(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, tiles: TileMatches | None, size0, size1,
+                  run_dtm: bool, dtm: DTMConfig | None = None) -> FinalMatches:
+    """The matches of F^theta (K, 2), (K, 2), (K,) and the tile matches (None: Sec. 3.8 did not run) as
+    Slime's output: with tiles, exact duplicates merged, then the global DTM when ``run_dtm``; sorted by score.
+
+    Args:
+        size0, size1: (H, W) of the images; dtm: the global DTM's parameters (the base pipeline's; None: the
+            defaults).
+    """
+    found = tiles or TileMatches.empty()
+    all0, all1 = np.vstack([xy0, found.xy0]), np.vstack([xy1, found.xy1])
+    all_scores = np.concatenate([scores, found.scores])
+    if tiles is not None and run_dtm:
+        out0, out1, out_scores = global_dtm(all0, all1, all_scores, size0, size1, dtm)
+    else:
+        merged = merge_duplicates(all0, all1, all_scores) if tiles is not None else (all0, all1, all_scores)
+        order = np.argsort(merged[2], kind="stable")
+        out0, out1, out_scores = (column[order] for column in merged)
+    return FinalMatches(out0, out1, out_scores, all0, all1, all_scores)

@@ -1,0 +1,1 @@
+"""Process-level helpers of the package (private): forked worker maps."""

@@ -1,0 +1,258 @@
+"""Block planes (Secs. 3.2-3.3): every block pair matched by the base pipeline and a homography RANSAC, then
+re-matched under the plane's fixed orientations (theta = 0 in image 0, theta* in image 1) and RANSAC again:
+the planes M_l, H_l, mapped to original-image pixels for the later stages.
+
+The pairs and RANSACs run in the job runner's workers (:mod:`.jobs`): RANSACs of all block pairs as batches,
+the fixed-orientation descriptors once per (level, bin) for the blocks that a re-run needs
+(:class:`.fixed_descriptors.FixedDescriptors`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..geometry.homography import project
+from ..geometry.ransac import HomographyRansacConfig
+from ..pipelines import BasePipeline
+from ..types import Features
+from .blocks import Block
+from .fixed_descriptors import FixedDescriptors
+from .jobs import MatchJob, match_jobs, pair_workers, ransac_batches
+from .levels import ScaleLevel
+from .match_table import MatchTable, deduplicate
+from .orientations import orientation_bin, relative_orientation
+
+__all__ = ["BlockPairMatches", "BlockPlanes", "block_planes", "block_planes_to_original", "match_block_pairs"]
+
+
+@dataclass
+class BlockPairMatches:
+    """Matches of block pairs, in scaled-image pixels of each side.
+
+    Attributes:
+        pairs: (P, 2) block indices (w in image 0, w' in image 1) of the pairs that produced a plane.
+        H: (P, 3, 3) homographies from scaled image 0 (of block w) to scaled image 1 (of block w').
+        theta: (P,) plane orientation theta* (radians) used for the refined run.
+        match_pair: (M,) index into ``pairs`` of each match.
+        xy0, xy1: (M, 2) matched keypoints in the scaled images.
+        scale0, scale1: (M,) patch scales in scaled-image pixels.
+        scores: (M,) base-pipeline dissimilarities.
+    """
+
+    pairs: np.ndarray
+    H: np.ndarray
+    theta: np.ndarray
+    match_pair: np.ndarray
+    xy0: np.ndarray
+    xy1: np.ndarray
+    scale0: np.ndarray
+    scale1: np.ndarray
+    scores: np.ndarray
+
+
+class _BlockSide:
+    """One image's blocks as the block pairs see them: each block's own features and, per orientation bin,
+    its fixed-orientation features (each built once, shared by the block's pairs)."""
+
+    def __init__(self, levels: list[ScaleLevel], blocks: list[Block], fixed: FixedDescriptors) -> None:
+        self.blocks, self.fixed = blocks, fixed
+        self.where = {w: (level, i) for level in levels for i, w in enumerate(level.blocks)}
+        self._own: dict[int, Features] = {}
+        self._fixed: dict[tuple[int, int], Features] = {}
+
+    def own(self, block: int) -> Features:
+        """The features of ``block``'s core with the pipeline's own orientations (level pixels)."""
+        if block not in self._own:
+            level, i = self.where[block]
+            self._own[block] = level.features.subset(torch.from_numpy(level.members[i]))
+        return self._own[block]
+
+    def wanted(self, block: int) -> tuple[ScaleLevel, np.ndarray]:
+        """The level of ``block`` and the indices of its core's features there."""
+        level, i = self.where[block]
+        return level, level.members[i]
+
+    def under(self, block: int, bin_index: int) -> Features:
+        """The features of ``block``'s core under the fixed orientation of ``bin_index`` (computed before)."""
+        if (block, bin_index) not in self._fixed:
+            self._fixed[block, bin_index] = self.fixed.features(*self.wanted(block), bin_index)
+        return self._fixed[block, bin_index]
+
+
+def match_block_pairs(
+    pipeline: BasePipeline,
+    levels0: list[ScaleLevel],
+    levels1: list[ScaleLevel],
+    blocks0: list[Block],
+    blocks1: list[Block],
+    ransac: HomographyRansacConfig,
+    bins: int = 16,
+    min_matches: int = 8,
+    seed: int = 0,
+    workers: int = 1,
+) -> tuple[BlockPairMatches, dict[str, int]]:
+    """Secs. 3.2 + 3.3 for every block pair: base pipeline + homography RANSAC, then the re-run with
+    fixed orientations (theta = 0 in image 0, theta* in image 1) + RANSAC -> M_l and H_l.
+
+    Returns:
+        The refined planes and their matches, in level pixels, and counts for the summary: block pairs,
+        first-run planes, pairs re-matched under fixed orientations (on an upright base none: the first run's
+        matches are reused, ``BasePipeline.own_frames_upright``) and refined planes.
+    """
+    fixed = FixedDescriptors(pipeline, bins, workers)
+    side0, side1 = _BlockSide(levels0, blocks0, fixed), _BlockSide(levels1, blocks1, fixed)
+    pairs = [(w0, w1) for w0 in range(len(blocks0)) for w1 in range(len(blocks1))]
+
+    def own_job(k: int) -> MatchJob:
+        w0, w1 = pairs[k]
+        return side0.own(w0), side1.own(w1), blocks0[w0], blocks1[w1], None
+
+    # 3.2: the base pipeline with its own orientations, then RANSAC.
+    first = match_jobs(pipeline, len(pairs), own_job, pair_workers(len(pairs), workers))
+    results = ransac_batches([(xy0, xy1) for _, xy0, xy1 in first], ransac, seed, workers)
+    thetas = {}
+    for pair, (m, _, _), res in zip(pairs, first, results):
+        if res.model is None or res.inliers.sum() < min_matches:
+            continue
+        m_in = m.subset(res.inliers)
+        angle0 = side0.own(pair[0]).angle[torch.from_numpy(m_in.idx0)].cpu().numpy()
+        angle1 = side1.own(pair[1]).angle[torch.from_numpy(m_in.idx1)].cpu().numpy()
+        thetas[pair] = relative_orientation(angle0, angle1, bins=bins)
+
+    # 3.3: re-run with fixed orientations on the pairs that produced a plane.
+    refined_pairs = list(thetas)
+    bin_of = {pair: orientation_bin(theta, bins) for pair, theta in thetas.items()}
+    upright = pipeline.own_frames_upright()
+    if upright:  # the features' own descriptors are those of bin 0 (angle 0)
+        fixed.use_own([*levels0, *levels1])
+    requests: dict[int, tuple[ScaleLevel, dict[int, list]]] = {}  # by level: bin -> the blocks' indices
+    for pair in refined_pairs:
+        for (level, index), bin_index in ((side0.wanted(pair[0]), 0), (side1.wanted(pair[1]), bin_of[pair])):
+            requests.setdefault(id(level), (level, {}))[1].setdefault(bin_index, []).append(index)
+    fixed.compute([(level, {b: np.concatenate(parts) for b, parts in wanted.items()})
+                   for level, wanted in requests.values()])
+
+    def fixed_job(k: int) -> MatchJob:
+        w0, w1 = pair = refined_pairs[k]
+        return side0.under(w0, 0), side1.under(w1, bin_of[pair]), blocks0[w0], blocks1[w1], None
+
+    # On an upright base a pair with theta* = 0 (all of them: every angle is 0) would match exactly as in the
+    # first run: its matches are reused, and only its RANSAC runs again.
+    repeats = [upright and bin_of[pair] == 0 for pair in refined_pairs]
+    redo = [k for k, repeat in enumerate(repeats) if not repeat]
+    rerun = iter(match_jobs(pipeline, len(redo), lambda j: fixed_job(redo[j]), pair_workers(len(redo), workers)))
+    second = [first[w0 * len(blocks1) + w1] if repeat else next(rerun)  # ``pairs`` order
+              for (w0, w1), repeat in zip(refined_pairs, repeats)]
+    results = ransac_batches([(xy0, xy1) for _, xy0, xy1 in second], ransac, seed + 1, workers)
+
+    keep_pairs, hs, theta_out, parts = [], [], [], []
+    for pair, (m, _, _), res in zip(refined_pairs, second, results):
+        if res.model is None or res.inliers.sum() < min_matches:
+            continue
+        m_in = m.subset(res.inliers)
+        keep_pairs.append(pair)
+        hs.append(res.model)
+        theta_out.append(bin_of[pair] * 2 * math.pi / bins)
+        parts.append((len(keep_pairs) - 1, side0.under(pair[0], 0), side1.under(pair[1], bin_of[pair]), m_in))
+    counts = {"block_pairs": len(pairs), "block_planes_first": len(thetas), "block_pairs_rerun": len(redo),
+              "block_planes": len(keep_pairs)}
+    return _collect(keep_pairs, hs, theta_out, parts), counts
+
+
+def _collect(pairs, hs, thetas, parts) -> BlockPairMatches:
+    if not parts:
+        z = np.zeros
+        return BlockPairMatches(z((0, 2), np.int64), z((0, 3, 3)), z(0), z(0, np.int64), z((0, 2)), z((0, 2)),
+                                z(0), z(0), z(0))
+    cols = {k: [] for k in ("pair", "xy0", "xy1", "s0", "s1", "score")}
+    for index, f0, f1, m in parts:
+        i0, i1 = torch.from_numpy(m.idx0), torch.from_numpy(m.idx1)
+        cols["pair"].append(np.full(len(m), index))
+        cols["xy0"].append(f0.xy[i0].cpu().numpy())
+        cols["xy1"].append(f1.xy[i1].cpu().numpy())
+        cols["s0"].append(f0.scale[i0].cpu().numpy())
+        cols["s1"].append(f1.scale[i1].cpu().numpy())
+        cols["score"].append(m.scores)
+    cat = {k: np.concatenate(v).astype(np.int64 if k == "pair" else np.float64) for k, v in cols.items()}
+    return BlockPairMatches(np.asarray(pairs, np.int64), np.stack(hs), np.asarray(thetas), cat["pair"],
+                            cat["xy0"], cat["xy1"], cat["s0"], cat["s1"], cat["score"])
+
+
+def _scaling(blocks: list[Block], index: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) maps original px -> scaled px of the blocks ``index`` (pixel-centre convention)."""
+    fx = np.array([blocks[i].fx for i in index])
+    fy = np.array([blocks[i].fy for i in index])
+    s = np.zeros((len(index), 3, 3))
+    s[:, 0, 0], s[:, 1, 1], s[:, 2, 2] = fx, fy, 1.0
+    s[:, 0, 2], s[:, 1, 2] = 0.5 * fx - 0.5, 0.5 * fy - 0.5
+    return s
+
+
+def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks1: list[Block]
+                             ) -> tuple[MatchTable, np.ndarray, np.ndarray]:
+    """Block-pair matches and homographies in original-image pixels (Sec. 3.4's reference frame).
+
+    Returns:
+        The match table (theta = 0 in image 0 and theta* of its plane in image 1, as forced by Sec. 3.3),
+        (L, 3, 3) homographies original image 0 -> original image 1, and (L,) plane sides.
+    """
+    s0 = _scaling(blocks0, bpm.pairs[:, 0])
+    s1 = _scaling(blocks1, bpm.pairs[:, 1])
+    h = np.linalg.inv(s1) @ bpm.H @ s0
+    pair = bpm.match_pair
+    f0 = np.sqrt(s0[:, 0, 0] * s0[:, 1, 1])[pair]
+    f1 = np.sqrt(s1[:, 0, 0] * s1[:, 1, 1])[pair]
+    xy0 = (bpm.xy0 + 0.5) / np.stack([s0[:, 0, 0], s0[:, 1, 1]], 1)[pair] - 0.5
+    xy1 = (bpm.xy1 + 0.5) / np.stack([s1[:, 0, 0], s1[:, 1, 1]], 1)[pair] - 0.5
+    table = MatchTable(xy0, xy1, np.zeros(len(pair)), bpm.theta[pair], bpm.scale0 / f0, bpm.scale1 / f1,
+                       np.ones(len(pair)), pair, bpm.scores)
+    side = np.ones(len(h))
+    for plane in range(len(h)):  # one small projection per plane
+        _, w = project(h[plane], xy0[pair == plane])
+        side[plane] = 1.0 if np.sum(np.sign(w)) >= 0 else -1.0
+    return table, h, side
+
+
+@dataclass
+class BlockPlanes:
+    """The planes of Secs. 3.2-3.3 in original-image pixels, the frame of every later stage.
+
+    Attributes:
+        level_matches: the planes and their matches as found, in level pixels.
+        raw: (M rows) every plane's matches (theta = 0 in image 0, theta* of its plane in image 1).
+        table: ``raw`` with exact duplicates merged into weighted rows (``deduplicate``): the match table of
+            Secs. 3.4-3.8.
+        H: (L, 3, 3) homographies original image 0 -> original image 1; side: (L,) their plane sides.
+        counts: block pairs, first-run planes, re-matched pairs, planes, block matches, unique block matches.
+    """
+
+    level_matches: BlockPairMatches
+    raw: MatchTable
+    table: MatchTable
+    H: np.ndarray
+    side: np.ndarray
+    counts: dict[str, int]
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The planes and the match table, for ``--save-stages``."""
+        return {"planes_pairs": self.level_matches.pairs, "planes_H": self.H, "planes_theta": self.level_matches.theta,
+                "block_matches_xy0": self.raw.xy0, "block_matches_xy1": self.raw.xy1,
+                "block_matches_plane": self.raw.source,
+                "table_xy0": self.table.xy0, "table_xy1": self.table.xy1, "table_weight": self.table.weight}
+
+
+def block_planes(pipeline: BasePipeline, levels0: list[ScaleLevel], levels1: list[ScaleLevel], blocks0: list[Block],
+                 blocks1: list[Block], ransac: HomographyRansacConfig, bins: int = 16, min_matches: int = 8,
+                 seed: int = 0, workers: int = 1) -> BlockPlanes:
+    """Secs. 3.2-3.3 (``match_block_pairs``, same arguments), the planes mapped to original pixels and their
+    matches gathered in one deduplicated match table."""
+    matches, counts = match_block_pairs(pipeline, levels0, levels1, blocks0, blocks1, ransac, bins=bins,
+                                        min_matches=min_matches, seed=seed, workers=workers)
+    raw, h, side = block_planes_to_original(matches, blocks0, blocks1)
+    table, _ = deduplicate(raw)
+    counts.update(block_matches=len(raw), block_matches_unique=len(table))
+    return BlockPlanes(matches, raw, table, h, side, counts)
