@@ -12,7 +12,7 @@ from skimage.data import stereo_motorcycle
 
 from slime_match.cli import main
 from slime_match.io import save_json, save_npz
-from slime_match.run_export import PairMatches
+from slime_match.runs.export import PairMatches
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = (ROOT.parent / "shared").resolve()

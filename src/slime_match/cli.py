@@ -118,7 +118,7 @@ def _report(result, out: Path) -> None:
 def cmd_match(args: argparse.Namespace) -> int:
     from .io import load_image
     from .matcher import Matcher
-    from .outputs import write_pair_outputs
+    from .runs.outputs import write_pair_outputs
 
     config = _config(args)
     image0, image1 = load_image(args.image0), load_image(args.image1)  # bad input fails before model loading
@@ -130,8 +130,8 @@ def cmd_match(args: argparse.Namespace) -> int:
 
 
 def cmd_pairs(args: argparse.Namespace) -> int:
-    from .batch import INDEX_FILE, match_pairs, read_pairs
     from .matcher import FEATURE_CACHE_MB
+    from .runs.batch import INDEX_FILE, match_pairs, read_pairs
 
     jobs = read_pairs(args.pairs, args.images)  # a bad pairs file or a missing image fails before any work
     cache_mb = FEATURE_CACHE_MB if args.feature_cache_mb is None else args.feature_cache_mb
@@ -149,7 +149,7 @@ def cmd_pairs(args: argparse.Namespace) -> int:
 
 
 def cmd_make_pairs(args: argparse.Namespace) -> int:
-    from .pair_lists import make_pairs, write_pairs
+    from .runs.pair_lists import make_pairs, write_pairs
 
     path = Path(args.pairs_file)
     _check_output_folder(str(path.parent))
@@ -174,7 +174,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     from .eval.metrics import disparity_error
     from .matcher import Matcher
-    from .outputs import write_pair_outputs
+    from .runs.outputs import write_pair_outputs
 
     left, right, disparity = stereo_motorcycle()
     out = Path(args.output)
@@ -218,7 +218,7 @@ def cmd_viz(args: argparse.Namespace) -> int:
 
 
 def cmd_colmap(args: argparse.Namespace) -> int:
-    from .colmap import DATABASE_FILE, SPARSE_FOLDER, export_run
+    from .runs.colmap import DATABASE_FILE, SPARSE_FOLDER, export_run
 
     summary = export_run(args.run, args.images, args.output, merge_radius=args.merge_radius,
                          inliers_only=args.inliers_only, camera_mode=args.camera_mode,
@@ -237,7 +237,7 @@ def cmd_colmap(args: argparse.Namespace) -> int:
 
 
 def cmd_hloc(args: argparse.Namespace) -> int:
-    from .hloc import FEATURES_FILE, MATCHES_FILE, export_hloc
+    from .runs.hloc import FEATURES_FILE, MATCHES_FILE, export_hloc
 
     summary = export_hloc(args.run, args.images, args.output, merge_radius=args.merge_radius,
                           inliers_only=args.inliers_only, overwrite=args.overwrite)
@@ -318,7 +318,7 @@ def build_parser() -> argparse.ArgumentParser:
     viz.add_argument("--stage", action="append", default=None, help="stage name(s) to draw (default: all)")
     viz.set_defaults(func=cmd_viz)
 
-    from .colmap import CAMERA_MODES
+    from .runs.colmap import CAMERA_MODES
 
     colmap = sub.add_parser("colmap", help="a `slime pairs` run as a COLMAP database and its sparse "
                                            "reconstruction (needs pycolmap)")

@@ -1,6 +1,6 @@
 """A ``slime pairs`` run as a COLMAP database, and optionally its sparse reconstruction (``slime colmap``).
 
-The run's keypoints are merged into one list per image with one-to-one matches (``run_export``); COLMAP's
+The run's keypoints are merged into one list per image with one-to-one matches (:mod:`.export`); COLMAP's
 own geometric verification and incremental mapper (pycolmap, an optional dependency) do the rest.
 """
 
@@ -20,11 +20,9 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .errors import ConfigError, ImageError, SlimeMatchError
-from .io import save_json
-from .outputs import SUMMARY_FILE
-from .pair_lists import write_pairs
-from .run_export import (
+from ..errors import ConfigError, ImageError, SlimeMatchError
+from ..io import save_json
+from .export import (
     PairMatches,
     check_export_folder,
     check_images,
@@ -32,6 +30,8 @@ from .run_export import (
     read_run,
     staged_folder,
 )
+from .outputs import SUMMARY_FILE
+from .pair_lists import write_pairs
 
 logger = logging.getLogger("slime_match")
 

@@ -5,7 +5,7 @@ from collections import OrderedDict
 
 import pytest
 
-from slime_match.pair_schedule import PairScheduler, RecentImages
+from slime_match.runs.schedule import PairScheduler, RecentImages
 
 
 def _lru_misses(pairs, order, capacity):

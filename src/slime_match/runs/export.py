@@ -22,12 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import ConfigError, ImageError, SlimeMatchError, some_of
+from ..io import current_umask, load_npz
+from ..matching.nn_kernels import greedy_accept
+from ..slime.clusters import greedy_clusters
 from .batch import INDEX_FILE
-from .errors import ConfigError, ImageError, SlimeMatchError, some_of
-from .io import current_umask, load_npz
-from .matching.nn_kernels import greedy_accept
 from .outputs import MATCHES_FILE
-from .slime.clusters import greedy_clusters
 
 
 @dataclass

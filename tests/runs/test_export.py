@@ -9,7 +9,7 @@ from conftest import export_pairs, write_run_folder
 
 from slime_match.errors import ConfigError, ImageError, SlimeMatchError
 from slime_match.io import save_json
-from slime_match.run_export import (
+from slime_match.runs.export import (
     PairMatches,
     check_export_folder,
     check_images,

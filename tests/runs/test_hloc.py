@@ -7,8 +7,8 @@ import pytest
 from conftest import export_pairs, run_cli, write_run_folder
 
 from slime_match.errors import ConfigError, ImageError
-from slime_match.hloc import export_hloc, pair_key, similarity
-from slime_match.run_export import PairMatches, merge_keypoints
+from slime_match.runs.export import PairMatches, merge_keypoints
+from slime_match.runs.hloc import export_hloc, pair_key, similarity
 
 h5py = pytest.importorskip("h5py")
 

@@ -5,7 +5,7 @@ image name with ``keypoints`` (N, 2) and ``image_size`` (width, height); ``match
 named by hloc's ``names_to_pair`` (each name with ``/`` turned to ``-``, the two joined by ``/``), with
 ``matches0`` (N0,), the index of each keypoint of the first image's match in the second image or -1, and
 ``matching_scores0`` (N0,). hloc's triangulation, reconstruction and localization read them. The run's keypoints
-are merged into one list per image with one-to-one matches first (``run_export``). h5py is an optional
+are merged into one list per image with one-to-one matches first (:mod:`.export`). h5py is an optional
 dependency.
 """
 
@@ -19,11 +19,11 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ConfigError
-from .io import image_size, save_json
+from ..errors import ConfigError
+from ..io import image_size, save_json
+from .export import check_export_folder, check_images, merge_keypoints, read_run, staged_folder
 from .outputs import SUMMARY_FILE
 from .pair_lists import write_pairs
-from .run_export import check_export_folder, check_images, merge_keypoints, read_run, staged_folder
 
 logger = logging.getLogger("slime_match")
 
@@ -60,7 +60,7 @@ def export_hloc(run: str | os.PathLike, image_dir: str | os.PathLike, output: st
 
     Args:
         run: the ``slime pairs`` run folder; image_dir: the folder its image names are relative to.
-        merge_radius, inliers_only: see :func:`slime_match.run_export.merge_keypoints` and ``read_run``.
+        merge_radius, inliers_only: see :func:`slime_match.runs.export.merge_keypoints` and ``read_run``.
         overwrite: replace ``output`` when it holds an earlier hloc export (a non-empty folder is refused
             otherwise).
 

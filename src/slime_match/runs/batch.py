@@ -26,14 +26,14 @@ from typing import Any
 
 from tqdm import tqdm
 
-from . import __version__
-from .config import MatchConfig
-from .cpus import available_cpus
-from .errors import ConfigError, ImageError, some_of
-from .io import jsonable, load_image, save_json
-from .matcher import FEATURE_CACHE_MB, Matcher
+from .. import __version__
+from ..config import MatchConfig
+from ..cpus import available_cpus
+from ..errors import ConfigError, ImageError, some_of
+from ..io import jsonable, load_image, save_json
+from ..matcher import FEATURE_CACHE_MB, Matcher
 from .outputs import SUMMARY_FILE, is_complete, write_pair_outputs
-from .pair_schedule import PairScheduler, RecentImages
+from .schedule import PairScheduler, RecentImages
 
 logger = logging.getLogger("slime_match")
 
@@ -112,7 +112,7 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
     """Match every pair into ``output/<folder>/``, skipping the pairs already finished there.
 
     The pairs are matched in the order that best reuses each worker's feature cache
-    (:class:`~slime_match.pair_schedule.PairScheduler`); the records keep ``jobs`` order.
+    (:class:`~slime_match.runs.schedule.PairScheduler`); the records keep ``jobs`` order.
 
     Args:
         config: the matcher configuration (the same for every pair).

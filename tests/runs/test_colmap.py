@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from conftest import DATA, export_pairs, require, run_cli, write_run_folder
 
-from slime_match.batch import match_pairs, read_pairs
-from slime_match.colmap import export_run, to_stored_frame, write_database
 from slime_match.config import make_config
 from slime_match.errors import ConfigError, ImageError
 from slime_match.io import load_image
-from slime_match.run_export import PairMatches, merge_keypoints
+from slime_match.runs.batch import match_pairs, read_pairs
+from slime_match.runs.colmap import export_run, to_stored_frame, write_database
+from slime_match.runs.export import PairMatches, merge_keypoints
 
 SACRE_COEUR = DATA / "sacre_coeur"
 # three views that all overlap (each pair > 4000 weight-free Slime matches) with enough baseline for COLMAP's

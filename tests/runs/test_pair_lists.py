@@ -4,9 +4,15 @@
 import pytest
 from conftest import run_cli
 
-from slime_match.batch import read_pairs
 from slime_match.errors import ConfigError, ImageError
-from slime_match.pair_lists import exhaustive_pairs, list_images, make_pairs, sequential_pairs, write_pairs
+from slime_match.runs.batch import read_pairs
+from slime_match.runs.pair_lists import (
+    exhaustive_pairs,
+    list_images,
+    make_pairs,
+    sequential_pairs,
+    write_pairs,
+)
 
 
 @pytest.fixture

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import save_json, save_npz
-from .result import MatchResult
+from ..io import save_json, save_npz
+from ..result import MatchResult
 
 MATCHES_FILE = "matches.npz"
 SUMMARY_FILE = "summary.json"
@@ -26,7 +26,7 @@ def write_pair_outputs(result: MatchResult, image0: np.ndarray, image1: np.ndarr
         out: the pair's folder (created if needed).
         plot: also draw matches.png.
     """
-    from .viz import plot_matches
+    from ..viz import plot_matches
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

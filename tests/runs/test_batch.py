@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from conftest import run_cli
 
-from slime_match.batch import PairJob, match_pairs, read_pairs
 from slime_match.config import make_config
 from slime_match.cpus import available_cpus
 from slime_match.errors import ConfigError, ImageError
+from slime_match.runs.batch import PairJob, match_pairs, read_pairs
 
 FAST = ["--method", "rootsift"]  # the base RootSIFT alone: the run logic, not the matcher, is under test
 SLIME_SMALL = ["--shape", "baumberg", "--orientation", "gradient", "--descriptor", "rootsift", "--scales", "1"]

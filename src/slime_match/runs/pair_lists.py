@@ -10,8 +10,8 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from .errors import ConfigError, ImageError, some_of
-from .io import IMAGE_EXTS, save_text
+from ..errors import ConfigError, ImageError, some_of
+from ..io import IMAGE_EXTS, save_text
 
 PAIRING_MODES = ("exhaustive", "sequential")
 
