@@ -8,8 +8,8 @@ Example:
 
 __version__ = "0.1.0"
 
-from . import openmp  # noqa: I001, F401  (first: sets the OpenMP spin default before torch is loaded)
-from . import compile_notice  # noqa: F401  (a notice while numba compiles the loops on a first run)
+from ._runtime import openmp  # noqa: I001, F401  (first: sets the OpenMP spin default before torch is loaded)
+from ._runtime import compile_notice  # noqa: F401  (a notice while numba compiles the loops on a first run)
 from .config import MatchConfig, make_config
 from .errors import ConfigError, ImageError, SlimeMatchError, WeightsNotFoundError
 from .io import load_image

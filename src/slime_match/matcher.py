@@ -11,6 +11,7 @@ import numpy as np
 import torch
 
 from . import __version__
+from ._runtime.timing import StageTimer
 from .config import MatchConfig, make_config
 from .errors import ConfigError, ImageError, caused_by_interrupt
 from .features.descriptors import resolve_descriptor
@@ -21,7 +22,6 @@ from .resize import resize_image, to_original
 from .result import MatchResult
 from .slime.level_cache import LevelCache
 from .slime.pipeline import run_slime, stages_to_original
-from .timing import StageTimer
 
 logger = logging.getLogger("slime_match")
 

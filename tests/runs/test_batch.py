@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from conftest import run_cli
 
+from slime_match._runtime.cpus import available_cpus
 from slime_match.config import make_config
-from slime_match.cpus import available_cpus
 from slime_match.errors import ConfigError, ImageError
 from slime_match.runs.batch import PairJob, match_pairs, read_pairs
 

@@ -27,8 +27,8 @@ from typing import Any
 from tqdm import tqdm
 
 from .. import __version__
+from .._runtime.cpus import available_cpus
 from ..config import MatchConfig
-from ..cpus import available_cpus
 from ..errors import ConfigError, ImageError, some_of
 from ..io import jsonable, load_image, save_json
 from ..matcher import FEATURE_CACHE_MB, Matcher

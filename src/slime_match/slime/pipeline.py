@@ -18,13 +18,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._runtime.cpus import available_cpus
 from .._runtime.forking import torch_threads
-from ..cpus import available_cpus
+from .._runtime.timing import StageTimer
 from ..geometry import ransac_kernels
 from ..geometry.ransac import HomographyRansacConfig
 from ..pipelines import BasePipeline
 from ..resize import homography_to_original, to_original
-from ..timing import StageTimer
 from .block_planes import block_planes
 from .blocks import Block, BlockConfig, make_blocks, make_tiles
 from .diagnostics import empty_result_reason, layout_warning, tile_count_warning

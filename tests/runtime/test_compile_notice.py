@@ -5,7 +5,7 @@ import os
 import subprocess
 import sys
 
-from slime_match.compile_notice import NOTICE
+from slime_match._runtime.compile_notice import NOTICE
 
 CALL_A_LOOP = ("import numpy as np; from slime_match.matching.dtm_kernels import unique_inverse; "
                "print(unique_inverse(np.array([3, 1, 3], np.int64))[1])")

@@ -4,8 +4,8 @@ import os
 
 import pytest
 
+from slime_match._runtime.cpus import available_cpus, cgroup_cpu_quota
 from slime_match.config import make_config
-from slime_match.cpus import available_cpus, cgroup_cpu_quota
 from slime_match.errors import ConfigError
 from slime_match.slime.pipeline import _workers
 

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from slime_match.openmp import SPIN_COUNT
+from slime_match._runtime.openmp import SPIN_COUNT
 
 
 def _spin_after(code: str, **env: str) -> str:
