@@ -1,6 +1,5 @@
-"""Blocks and tiles: grid geometry, coordinate maps, core membership, Lanczos3 resize."""
+"""Blocks and tiles: grid geometry, coordinate maps, core membership."""
 
-import cv2
 import numpy as np
 import pytest
 
@@ -10,7 +9,6 @@ from slime_match.slime.blocks import (
     make_blocks,
     make_tiles,
     points_in_blocks,
-    resize_lanczos,
 )
 
 
@@ -92,22 +90,6 @@ def test_points_in_blocks_membership():
     for k in range(3):  # each scale covers the whole image
         rows = [i for i, b in enumerate(blocks) if b.scale_index == k]
         assert mem[rows].any(axis=0).all()
-
-
-def test_resize_lanczos_matches_references():
-    rng = np.random.default_rng(0)
-    img = cv2.GaussianBlur(rng.random((120, 160, 3)).astype(np.float32), (0, 0), 3)
-    up = resize_lanczos(img, 2.0)
-    assert up.shape == (240, 320, 3) and up.dtype == np.float32
-    ref = cv2.resize(img, (320, 240), interpolation=cv2.INTER_LANCZOS4)
-    assert np.abs(up - ref)[8:-8, 8:-8].max() < 5e-3
-    down = resize_lanczos(img, 0.5)
-    ref = cv2.resize(img, (80, 60), interpolation=cv2.INTER_AREA)
-    assert np.abs(down - ref)[4:-4, 4:-4].max() < 5e-3
-    np.testing.assert_allclose(resize_lanczos(np.full((37, 53), 2.5), 0.37), 2.5, atol=1e-9)
-    # antialiasing: a Nyquist checkerboard shrinks to a flat grey
-    checker = (np.indices((64, 64)).sum(0) % 2).astype(np.float64)
-    assert resize_lanczos(checker, 0.25)[2:-2, 2:-2].std() < 0.01
 
 
 def test_bad_config():

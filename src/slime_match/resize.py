@@ -7,8 +7,9 @@ original frame (pixel centres map to pixel centres).
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
+
+from slime_match.features.image_ops import resize_area
 
 
 def working_size(
@@ -28,14 +29,14 @@ def working_size(
 def resize_image(
     image: np.ndarray, max_side: int | None = None, size: tuple[int, int] | None = None
 ) -> tuple[np.ndarray, tuple[float, float]]:
-    """Resize an (H, W[, C]) image to its :func:`working_size` (area interpolation when shrinking); returns
-    it and the (sx, sy) factors original / resized ((1, 1) and the same array when nothing changes)."""
+    """Resize an (H, W[, C]) image to its :func:`working_size` (with
+    :func:`~slime_match.features.image_ops.resize_area`: area interpolation when shrinking); returns it and
+    the (sx, sy) factors original / resized ((1, 1) and the same array when nothing changes)."""
     h, w = image.shape[:2]
     nw, nh = working_size(w, h, max_side, size)
     if (nw, nh) == (w, h):
         return image, (1.0, 1.0)
-    interp = cv2.INTER_AREA if nw * nh < w * h else cv2.INTER_LINEAR
-    return cv2.resize(image, (nw, nh), interpolation=interp), (w / nw, h / nh)
+    return resize_area(image, (nw, nh)), (w / nw, h / nh)
 
 
 def to_original(xy: np.ndarray, scale: tuple[float, float]) -> np.ndarray:

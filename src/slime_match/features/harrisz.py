@@ -1,10 +1,11 @@
 """HarrisZ+ corner detector: colour-aware, multi-scale Harris with z-score response and uniform ranking.
 
-Implements ALGORITHMS.md section 1 (Bellavia & Mishkin, PRL 2022). The image work (2x Lanczos upsampling,
-gradients, Gaussian filtering, response, peaks) runs on the input's device: in torch, except that on the CPU
-the three filters (Lanczos resize, separable Gaussian, 7x7 max) call the equivalent OpenCV functions, which
-are ~10x faster there. The few thousand peaks then go to NumPy/SciPy for the greedy spatial selections:
-exact greedy results computed by a vectorised dependency resolution over k-d tree neighbour pairs.
+Implements ALGORITHMS.md section 1 (Bellavia & Mishkin, PRL 2022); the module is over 400 lines because it
+is that one paper algorithm, its strip-wise filtering and exact greedy selections included. The image work
+(2x Lanczos upsampling, gradients, Gaussian filtering, response, peaks) runs on the input's device with the
+filters of :mod:`slime_match.features.image_ops` (OpenCV's on the CPU, torch elsewhere). The few thousand
+peaks then go to NumPy/SciPy for the greedy spatial selections: exact greedy results computed by a
+vectorised dependency resolution over k-d tree neighbour pairs.
 
 Choices the spec leaves open: a working pixel u of the 2x image maps to the original pixel u / 2 - 0.25 (the
 exact inverse of the resize under the pixel-centre convention, rather than u / 2); Gaussian kernels have
@@ -18,18 +19,23 @@ z-scores are statistics of the whole image, summed row by row. The keypoints do 
 
 from __future__ import annotations
 
-import itertools
 import logging
 import math
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 import torch
-import torch.nn.functional as F
 from scipy.spatial import cKDTree
 
 from slime_match.errors import ConfigError, ImageError
+from slime_match.features.image_ops import (
+    blurred_rows,
+    central_gradient,
+    gaussian_radius,
+    lanczos_upsample2,
+    max_filter,
+    row_strips,
+)
 from slime_match.options import config_from_dict
 from slime_match.types import Keypoints
 
@@ -105,7 +111,7 @@ def detect_harrisz(image: torch.Tensor, config: HarrisZConfig | None = None) -> 
     device = image.device
     img = image.detach().float()
     height, width = img.shape[-2:]
-    largest_radius = _kernel_radius(_SQRT2 ** (cfg.num_levels - 1))
+    largest_radius = gaussian_radius(_SQRT2 ** (cfg.num_levels - 1))
     if min(height, width) <= 2 * largest_radius:
         logger.debug("HarrisZ+: image %dx%d too small for the filters, no keypoints", width, height)
         return _empty_keypoints(device)
@@ -144,70 +150,6 @@ def _empty_keypoints(device: torch.device) -> Keypoints:
     )
 
 
-def _kernel_radius(sigma: float) -> int:
-    return max(1, math.ceil(3.0 * sigma))
-
-
-def _use_opencv(x: torch.Tensor) -> bool:
-    """Whether the image filters of tensor ``x`` run in OpenCV (CPU tensors) rather than in torch."""
-    return x.device.type == "cpu"
-
-
-def _lanczos_weights(frac: float) -> torch.Tensor:
-    """(8,) normalised Lanczos-4 weights of the taps at floor(x) - 3 .. floor(x) + 4, frac = x - floor(x)."""
-    d = np.arange(8) - 3 - frac
-    w = np.sinc(d) * np.sinc(d / 4.0)
-    return torch.from_numpy(w / w.sum()).float()
-
-
-def _lanczos_upsample2(image: torch.Tensor) -> torch.Tensor:
-    """2x Lanczos-4 upsampling: ``cv2.resize(..., INTER_LANCZOS4)`` on CPU, an equivalent torch kernel elsewhere.
-
-    Output pixel u samples the input at u / 2 - 0.25 (pixel-centre convention), so each axis is a two-phase
-    8-tap filter (phase fractions 0.75 and 0.25) with replicated borders, exactly as OpenCV does.
-
-    Args:
-        image: (C, H, W) float.
-
-    Returns:
-        (C, 2H, 2W) float.
-    """
-    if _use_opencv(image):
-        src = image.detach().contiguous().numpy()
-        out = np.empty((src.shape[0], 2 * src.shape[1], 2 * src.shape[2]), src.dtype)
-        for channel, target in zip(src, out):  # into place: no second copy of the 2x image
-            cv2.resize(channel, target.shape[::-1], dst=target, interpolation=cv2.INTER_LANCZOS4)
-        return torch.from_numpy(out)
-    return _lanczos_upsample2_torch(image)
-
-
-def _lanczos_upsample2_torch(image: torch.Tensor) -> torch.Tensor:
-    """Torch version of :func:`_lanczos_upsample2`, (C, H, W) -> (C, 2H, 2W)."""
-    w_even, w_odd = _lanczos_weights(0.75).tolist(), _lanczos_weights(0.25).tolist()
-
-    def along_last(x: torch.Tensor) -> torch.Tensor:
-        n = x.shape[-1]
-        p = F.pad(x, (4, 4), mode="replicate")
-        even = sum(w * p[..., t : t + n] for t, w in enumerate(w_even))
-        odd = sum(w * p[..., t + 1 : t + 1 + n] for t, w in enumerate(w_odd))
-        return torch.stack((even, odd), dim=-1).flatten(-2)
-
-    rows = along_last(image)
-    return along_last(rows.transpose(-1, -2)).transpose(-1, -2).contiguous()
-
-
-def _central_gradient(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Central differences of an (H, W) image with replicated borders; returns d/dx and d/dy, each (H, W)."""
-    gx, gy = torch.empty_like(x), torch.empty_like(x)
-    torch.sub(x[:, 2:], x[:, :-2], out=gx[:, 1:-1])
-    torch.sub(x[:, 1], x[:, 0], out=gx[:, 0])
-    torch.sub(x[:, -1], x[:, -2], out=gx[:, -1])
-    torch.sub(x[2:], x[:-2], out=gy[1:-1])
-    torch.sub(x[1], x[0], out=gy[0])
-    torch.sub(x[-1], x[-2], out=gy[-1])
-    return gx.mul_(0.5), gy.mul_(0.5)
-
-
 def _gradient_fields(image: torch.Tensor, color: bool, mask: bool = True) -> tuple[torch.Tensor, ...]:
     """Grey gradient (for the Harris tensor) and mask gradient ("best" colour field, or grey) of an image.
 
@@ -225,71 +167,17 @@ def _gradient_fields(image: torch.Tensor, color: bool, mask: bool = True) -> tup
         grey = image[0] * r + image[1] * g + image[2] * b
     else:
         grey = image[0]
-    gx, gy = _central_gradient(grey)
+    gx, gy = central_gradient(grey)
     del grey
     if not mask:
         return gx, gy
     if not (color and image.shape[0] == 3):
         return gx, gy, gx, gy
-    mx, my = _central_gradient(image.amax(0))
+    mx, my = central_gradient(image.amax(0))
     bx = torch.where(mx.abs() > gx.abs(), mx, gx)
     del mx
     by = torch.where(my.abs() > gy.abs(), my, gy)
     return gx, gy, bx, by
-
-
-def _gaussian_kernel(sigma: float) -> np.ndarray:
-    """(2r+1,) normalised sampled Gaussian, r = ceil(3 sigma)."""
-    r = _kernel_radius(sigma)
-    k = np.exp(-(np.arange(-r, r + 1) ** 2) / (2.0 * sigma**2))
-    return k / k.sum()
-
-
-def _gaussian_blur(channels: list[torch.Tensor], sigma: float) -> list[torch.Tensor]:
-    """Separable Gaussian smoothing of (H, W) images with reflected borders (BORDER_REFLECT_101).
-
-    On CPU this calls ``cv2.sepFilter2D`` per image (about 10x faster than torch here); elsewhere it runs
-    torch shifted multiply-adds (much faster than single-channel conv2d). Both give the same result.
-    """
-    k = _gaussian_kernel(sigma)
-    if _use_opencv(channels[0]):
-        k32 = k.astype(np.float32)
-        return [
-            torch.from_numpy(
-                cv2.sepFilter2D(ch.contiguous().numpy(), -1, k32, k32, borderType=cv2.BORDER_REFLECT_101)
-            )
-            for ch in channels
-        ]
-    return list(_gaussian_blur_torch(torch.stack(channels), k).unbind(0))
-
-
-def _gaussian_blur_torch(x: torch.Tensor, kernel: np.ndarray) -> torch.Tensor:
-    """Torch separable filtering of (C, H, W) with a symmetric odd kernel and reflected borders."""
-    r = len(kernel) // 2
-    k = kernel.tolist()
-    height, width = x.shape[-2:]
-    p = F.pad(x[None], (r, r, r, r), mode="reflect")[0]
-    rows = k[0] * p[:, :, :width]
-    for i in range(1, 2 * r + 1):
-        rows.add_(p[:, :, i : i + width], alpha=k[i])
-    out = k[0] * rows[:, :height]
-    for i in range(1, 2 * r + 1):
-        out.add_(rows[:, i : i + height], alpha=k[i])
-    return out
-
-
-def _max_filter(x: torch.Tensor, window: int) -> torch.Tensor:
-    """Maximum over the window x window neighbourhood of each pixel of (H, W); outside pixels are ignored."""
-    if _use_opencv(x):
-        return torch.from_numpy(cv2.dilate(x.contiguous().numpy(), np.ones((window, window), np.uint8)))
-    return _max_filter_torch(x, window)
-
-
-def _max_filter_torch(x: torch.Tensor, window: int) -> torch.Tensor:
-    """Torch version of :func:`_max_filter` (separable max pooling)."""
-    h = window // 2
-    pooled = F.max_pool2d(x[None, None], (1, window), stride=1, padding=(0, h))
-    return F.max_pool2d(pooled, (window, 1), stride=1, padding=(h, 0))[0, 0]
 
 
 class _WorkingFields:
@@ -320,24 +208,10 @@ class _WorkingFields:
                 source = self.image[:, lo:hi]
             else:  # 2x row u samples original row u / 2 - 0.25 with taps floor(.) - 3 .. floor(.) + 4
                 first, last = max(0, lo // 2 - 5), min(self.image.shape[1], (hi + 1) // 2 + 5)
-                source = _lanczos_upsample2(self.image[:, first:last])[:, lo - 2 * first : hi - 2 * first]
+                source = lanczos_upsample2(self.image[:, first:last])[:, lo - 2 * first : hi - 2 * first]
             fields = _gradient_fields(source, self.color, mask)
             self._kept = key, tuple(f[start - lo : stop - lo] for f in fields)
         return self._kept[1]
-
-
-def _strips(height: int, width: int) -> list[tuple[int, int]]:
-    """Row ranges [start, stop) covering ``height`` rows of width ``width``: one, or strips of <= STRIP_PIXELS."""
-    pixels = height * width
-    count = 1 if pixels <= WHOLE_PIXELS else min(height, math.ceil(pixels / STRIP_PIXELS))
-    bounds = [round(i * height / count) for i in range(count + 1)]
-    return list(itertools.pairwise(bounds))
-
-
-def _blurred_rows(channels: list[torch.Tensor], sigma: float, start: int, stop: int, first: int
-                  ) -> list[torch.Tensor]:
-    """Rows start..stop-1 of the Gaussian-blurred images whose rows first.. are ``channels``."""
-    return [blurred[start - first : stop - first] for blurred in _gaussian_blur(channels, sigma)]
 
 
 def _total(x: torch.Tensor) -> float:
@@ -363,7 +237,7 @@ def _detect_level(
     s_i = _SQRT2**k
     s_d = s_i / _SQRT2
     height, width = fields.shape(factor)
-    strips = _strips(height, width)
+    strips = row_strips(height, width, WHOLE_PIXELS, STRIP_PIXELS)
     a, b, c, strong = _structure_tensor(fields, factor, strips, s_d * factor, s_i * factor, cfg.mask_threshold)
     means, stds = _harris_statistics(a, b, c, strips)
     h = cfg.peak_window // 2
@@ -412,7 +286,7 @@ def _structure_tensor(
     """
     height, width = fields.shape(factor)
     device = fields.image.device
-    r_d, r_i = _kernel_radius(sigma_d), _kernel_radius(sigma_i)
+    r_d, r_i = gaussian_radius(sigma_d), gaussian_radius(sigma_i)
 
     def margin(start: int, stop: int, extra: int) -> tuple[int, int]:
         return max(0, start - extra), min(height, stop + extra)
@@ -422,7 +296,7 @@ def _structure_tensor(
     for start, stop in strips:
         lo, hi = margin(start, stop, r_d)
         _, _, bx, by = fields.rows(factor, lo, hi)
-        total += _total(torch.hypot(*_blurred_rows([bx, by], sigma_d, start, stop, lo), out=magnitude[start:stop]))
+        total += _total(torch.hypot(*blurred_rows([bx, by], sigma_d, start, stop, lo), out=magnitude[start:stop]))
     above = magnitude > _float32(total / (height * width), device)
     del magnitude
     a, b, c = (torch.empty(height, width, device=device) for _ in range(3))
@@ -430,15 +304,15 @@ def _structure_tensor(
     for start, stop in strips:
         lo, hi = margin(start, stop, r_i)  # the rows whose gradients the integration blur reads
         first, last = margin(lo, hi, r_d)
-        mask = _blurred_rows([above[first:last].to(a.dtype)], sigma_d, lo, hi, first)[0]
+        mask = blurred_rows([above[first:last].to(a.dtype)], sigma_d, lo, hi, first)[0]
         strong[start:stop] = mask[start - lo : stop - lo] > mask_threshold
         gx, gy, *_ = fields.rows(factor, first, last, mask=False)
-        dx, dy = _blurred_rows([gx, gy], sigma_d, lo, hi, first)
+        dx, dy = blurred_rows([gx, gy], sigma_d, lo, hi, first)
         dx.mul_(mask)
         dy.mul_(mask)
         del mask
         for out, (p, q) in zip((a, b, c), ((dx, dx), (dy, dy), (dx, dy))):
-            out[start:stop] = _blurred_rows([p * q], sigma_i, start, stop, lo)[0]
+            out[start:stop] = blurred_rows([p * q], sigma_i, start, stop, lo)[0]
     return a, b, c, strong
 
 
@@ -487,7 +361,7 @@ def _unique_peaks(response: torch.Tensor, strong: torch.Tensor, window: int) -> 
     height, width = response.shape
     inner = (slice(h, height - h), slice(h, width - h))
     core = response[inner]
-    candidate = core == _max_filter(response, window)[inner]
+    candidate = core == max_filter(response, window)[inner]
     candidate &= core > 0
     candidate &= strong[inner]
     ys, xs = torch.nonzero(candidate, as_tuple=True)

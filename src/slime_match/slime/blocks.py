@@ -26,7 +26,8 @@ Worked examples (``make_blocks``; rows x columns per scale):
       s=3: 560x448 -> 3x4 (stride 122.7): 20 blocks.  Tiles: 4x5 = 20.
 
 Coordinates follow the package convention (pixel centres at integers).  A resize to ``(W_s, H_s)`` maps
-``x_s = (x + 0.5) W_s / W - 0.5`` (same for y), which is what :func:`resize_lanczos` implements.
+``x_s = (x + 0.5) W_s / W - 0.5`` (same for y), which is what the Lanczos3 resampler
+:func:`slime_match.features.image_ops.resize_lanczos` implements.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from slime_match.errors import ConfigError
+from slime_match.features.image_ops import resize_lanczos, scaled_size
 
 __all__ = [
     "Block",
@@ -45,8 +47,7 @@ __all__ = [
     "make_blocks",
     "make_tiles",
     "points_in_blocks",
-    "resize_lanczos",
-    "scaled_size",
+    "resize_lanczos",  # re-exported from features.image_ops for the block images' callers
 ]
 
 
@@ -170,11 +171,6 @@ class Block:
         return out
 
 
-def scaled_size(height: int, width: int, factor: float) -> tuple[int, int]:
-    """(W_s, H_s) = rounded size of a ``height`` x ``width`` image scaled by ``factor``."""
-    return max(1, round(width * factor)), max(1, round(height * factor))
-
-
 def _axis_cores(length: int, config: BlockConfig) -> list[tuple[int, int]]:
     """Half-open core intervals along one axis of ``length`` px (rule in the module docstring)."""
     core = config.core_size
@@ -268,55 +264,3 @@ def points_in_blocks(xy: np.ndarray, blocks: list[Block]) -> sp.csr_matrix:
     c = np.concatenate(cols) if cols else np.zeros(0, np.int64)
     return sp.csr_matrix((np.ones(len(r), dtype=bool), (r, c)), shape=(len(blocks), len(xy)))
 
-
-def _lanczos3(x: np.ndarray) -> np.ndarray:
-    return np.where(np.abs(x) < 3.0, np.sinc(x) * np.sinc(x / 3.0), 0.0)
-
-
-def _resize_matrix(n_out: int, n_in: int, dtype: np.dtype) -> sp.csr_matrix:
-    """(n_out, n_in) Lanczos3 interpolation matrix, antialiased (kernel widened) when shrinking."""
-    ratio = n_out / n_in
-    stretch = min(ratio, 1.0)
-    half = 3.0 / stretch
-    taps = math.ceil(2 * half) + 1
-    u = (np.arange(n_out) + 0.5) / ratio - 0.5
-    j = np.floor(u - half)[:, None].astype(np.int64) + 1 + np.arange(taps)[None]
-    w = _lanczos3((u[:, None] - j) * stretch)
-    j = np.abs(j)  # symmetric border: -1 -> 1 ... mirror around pixel 0 and n-1
-    period = 2 * (n_in - 1) if n_in > 1 else 1
-    j = j % period
-    j = np.where(j >= n_in, period - j, j)
-    rows = np.repeat(np.arange(n_out), taps)
-    mat = sp.csr_matrix((w.ravel(), (rows, j.ravel())), shape=(n_out, n_in))
-    mat.sum_duplicates()
-    norm = np.asarray(mat.sum(axis=1)).ravel()
-    return (sp.diags(1.0 / norm) @ mat).astype(dtype).tocsr()
-
-
-def resize_lanczos(image: np.ndarray, factor: float) -> np.ndarray:
-    """Resize with a separable Lanczos3 kernel (a = 3), antialiased when downscaling.
-
-    This is our own Lanczos3 (as in MATLAB's ``imresize(..., 'lanczos3')``): the kernel is stretched by
-    ``1 / factor`` when shrinking and the image border is mirrored.  OpenCV's ``INTER_LANCZOS4`` is a = 4
-    without antialiasing, so it is not used.  Pixel centres are aligned as ``x_s = (x + 0.5) f - 0.5``.
-
-    Args:
-        image: (H, W) or (H, W, C) float array.
-        factor: scale factor; the output size is :func:`scaled_size`.
-
-    Returns:
-        (H_s, W_s[, C]) array of the input's float dtype (float32 for integer input).
-    """
-    image = np.asarray(image)
-    dtype = image.dtype if np.issubdtype(image.dtype, np.floating) else np.dtype(np.float32)
-    h, w = image.shape[:2]
-    w_s, h_s = scaled_size(h, w, factor)
-    chans = image.shape[2:]
-    c = int(np.prod(chans)) if chans else 1
-    img = image.astype(dtype, copy=False).reshape(h, w * c)
-    if h_s != h:
-        img = _resize_matrix(h_s, h, dtype) @ img
-    img = img.reshape(h_s, w, c).transpose(1, 0, 2).reshape(w, h_s * c)
-    if w_s != w:
-        img = _resize_matrix(w_s, w, dtype) @ img
-    return np.ascontiguousarray(img.reshape(w_s, h_s, c).transpose(1, 0, 2).reshape((h_s, w_s) + chans))

@@ -10,6 +10,7 @@ from conftest import DATA, require
 
 from slime_match.errors import ConfigError, ImageError
 from slime_match.features import harrisz as hz
+from slime_match.features import image_ops
 from slime_match.features.harrisz import HarrisZConfig, detect_harrisz
 
 
@@ -197,28 +198,11 @@ def test_devices_and_input_checks():
         detect_harrisz((img * 255).to(torch.uint8))
 
 
-def test_torch_kernels_match_opencv_paths():
-    x = torch.rand(2, 37, 52)
-    for sigma in (0.7, 2.0, 4.0):
-        ref = torch.stack(hz._gaussian_blur(list(x), sigma))  # OpenCV on CPU
-        assert torch.allclose(hz._gaussian_blur_torch(x, hz._gaussian_kernel(sigma)), ref, atol=1e-5)
-    r = torch.rand(37, 52)
-    pooled = torch.nn.functional.max_pool2d(r[None, None], 7, stride=1, padding=3)[0, 0]
-    assert torch.equal(hz._max_filter(r, 7), pooled)
-    assert torch.equal(hz._max_filter_torch(r, 7), pooled)
-    up = hz._lanczos_upsample2_torch(x)
-    ref = torch.from_numpy(
-        np.stack([cv2.resize(ch, None, fx=2, fy=2, interpolation=cv2.INTER_LANCZOS4) for ch in x.numpy()])
-    )
-    assert up.shape == (2, 74, 104) and torch.allclose(up, ref, atol=1e-5)
-    assert torch.equal(hz._lanczos_upsample2(x), ref)  # OpenCV writing each channel into place
-
-
 def test_torch_path_matches_opencv_path(monkeypatch):
     # the path CUDA tensors take, run on the CPU
     img = _texture(5, (96, 120))
     ref = detect_harrisz(img)
-    monkeypatch.setattr(hz, "_use_opencv", lambda x: False)
+    monkeypatch.setattr(image_ops, "use_opencv", lambda x: False)
     kp = detect_harrisz(img)
     assert len(kp) == len(ref) > 20
     assert _cdist(kp.xy, ref.xy).min(1).values.max() < 1e-3
@@ -230,25 +214,18 @@ def test_strips_give_the_keypoints_of_the_whole_image(monkeypatch, opencv):
     """Filtered in strips thinner than the filters' margins (what large images get, for memory), an image gives
     bit-identical keypoints, colour and grey, on the OpenCV path and on the torch path (CUDA's)."""
     img = _texture(7, (150, 131))
-    monkeypatch.setattr(hz, "_use_opencv", lambda x: opencv)
+    monkeypatch.setattr(image_ops, "use_opencv", lambda x: opencv)
     grey = img.mean(0, keepdim=True)
     whole = [detect_harrisz(image, HarrisZConfig(color=color)) for image, color in ((img, True), (grey, False))]
     monkeypatch.setattr(hz, "WHOLE_PIXELS", 0)
     monkeypatch.setattr(hz, "STRIP_PIXELS", 10 * 131)  # 60 strips of 5 rows at 2x, 15 of 10 at 1x
-    assert len(hz._strips(300, 262)) == 60 and len(hz._strips(150, 131)) == 15
+    assert len(image_ops.row_strips(300, 262, hz.WHOLE_PIXELS, hz.STRIP_PIXELS)) == 60
+    assert len(image_ops.row_strips(150, 131, hz.WHOLE_PIXELS, hz.STRIP_PIXELS)) == 15
     strips = [detect_harrisz(image, HarrisZConfig(color=color)) for image, color in ((img, True), (grey, False))]
     for a, b in zip(whole, strips):
         assert len(a) > 30
         for field in ("xy", "ellipse", "response", "level"):
             assert torch.equal(getattr(a, field), getattr(b, field)), field
-
-
-def test_strip_rows_cover_the_image_once(monkeypatch):
-    monkeypatch.setattr(hz, "WHOLE_PIXELS", 99)
-    monkeypatch.setattr(hz, "STRIP_PIXELS", 30)
-    assert hz._strips(10, 10) == [(0, 2), (2, 5), (5, 8), (8, 10)]
-    assert hz._strips(11, 9) == [(0, 11)]  # up to WHOLE_PIXELS: one strip
-    assert hz._strips(3, 1000) == [(0, 1), (1, 2), (2, 3)]  # never an empty strip
 
 
 def test_response_statistics_are_exact_on_large_images():
