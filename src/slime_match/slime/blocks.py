@@ -39,7 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from slime_match.errors import ConfigError
-from slime_match.features.image_ops import resize_lanczos, scaled_size
+from slime_match.features.image_ops import scaled_size
 
 __all__ = [
     "Block",
@@ -47,7 +47,6 @@ __all__ = [
     "make_blocks",
     "make_tiles",
     "points_in_blocks",
-    "resize_lanczos",  # re-exported from features.image_ops for the block images' callers
 ]
 
 

@@ -25,9 +25,10 @@ import numpy as np
 import torch
 
 from .._runtime.forking import fork_map, torch_threads
+from ..features.image_ops import resize_lanczos
 from ..pipelines import BasePipeline
 from ..types import Features, Keypoints
-from .blocks import Block, points_in_blocks, resize_lanczos
+from .blocks import Block, points_in_blocks
 from .clusters import greedy_clusters
 from .frames import translate_features
 from .jobs import (
