@@ -40,7 +40,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import slime_match  # noqa: F401  (first: its OpenMP spin default must be set before torch loads)
+from slime_match._runtime.openmp import set_default_spin_count
+
+set_default_spin_count()  # as the slime command does, before torch loads
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"

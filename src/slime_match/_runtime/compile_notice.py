@@ -2,8 +2,9 @@
 would otherwise sit silent for up to a minute before its results.
 
 numba announces every compilation as a "numba:compile" event, and loading a loop from its on-disk cache is not
-one, so the notice appears exactly when compiling happens: once per process, in the process that imported the
-package (forked workers stay quiet).
+one, so the notice appears exactly when compiling happens: once per process, in the process that installed the
+listener (``install``: the ``slime`` command and every :class:`~slime_match.matcher.Matcher`; forked workers
+stay quiet).
 """
 
 from __future__ import annotations
@@ -40,4 +41,11 @@ class FirstCompileNotice(event.Listener):
         pass
 
 
-event.register("numba:compile", FirstCompileNotice())
+_installed: list[FirstCompileNotice] = []
+
+
+def install() -> None:
+    """Listen for this package's first compilation in this process (once, however often it is called)."""
+    if not _installed:
+        _installed.append(FirstCompileNotice())
+        event.register("numba:compile", _installed[0])

@@ -1,4 +1,4 @@
-"""A short OpenMP spin for torch's CPU thread pool, set when slime_match is imported before torch.
+"""A short OpenMP spin for torch's CPU thread pool, set by the ``slime`` command before torch loads.
 
 libgomp, the OpenMP runtime of PyTorch's Linux CPU wheels, lets a waiting worker thread spin 300,000 times
 before it sleeps. When other processes keep the cores busy, the spinning thread holds a core while the thread
@@ -10,7 +10,8 @@ the same times (2.0 s and 5.0 s); PASSIVE costs 0.3-0.9 s there. 1,000 is libgom
 outnumber cores.
 
 libgomp reads the variable once, when torch loads it. The default is therefore set only when torch is not
-imported yet, and never over the user's own GOMP_SPINCOUNT or OMP_WAIT_POLICY.
+imported yet, and never over the user's own GOMP_SPINCOUNT or OMP_WAIT_POLICY. Importing the package does not
+set it: in Python, export ``GOMP_SPINCOUNT=1000`` before torch is imported.
 """
 
 import os
@@ -24,5 +25,3 @@ def set_default_spin_count() -> None:
     if "torch" not in sys.modules and "GOMP_SPINCOUNT" not in os.environ and "OMP_WAIT_POLICY" not in os.environ:
         os.environ["GOMP_SPINCOUNT"] = SPIN_COUNT
 
-
-set_default_spin_count()
