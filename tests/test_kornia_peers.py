@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from slime_match.errors import ConfigError, WeightsNotFoundError
-from slime_match.eval.kornia_peers import KorniaDiskLightGlue, KorniaLoFTR, fit_size, resize_to, to_original
+from slime_match.eval.kornia_peers import KorniaDiskLightGlue, KorniaLoFTR, fit_size, frame_of, resize_to
 
 H, W = 96, 128
 
@@ -57,24 +57,24 @@ def test_fit_size_bounds_and_multiples():
         assert max(nh, nw) <= side and nh % mult == 0 and nw % mult == 0 and min(nh, nw) >= mult
 
 
-def test_to_original_maps_pixel_centres_and_edges_exactly():
+def test_frame_maps_pixel_centres_and_edges_exactly():
     small, big = (48, 64), (96, 128)
     xy = np.array([[0.0, 0.0], [63.0, 47.0], [-0.5, -0.5], [63.5, 47.5], [10.25, 3.0]])
     expect = np.array([[0.5, 0.5], [126.5, 94.5], [-0.5, -0.5], [127.5, 95.5], [21.0, 6.5]])
-    np.testing.assert_array_equal(to_original(xy, small, big), expect)
+    np.testing.assert_array_equal(frame_of(small, big).to_original(xy), expect)
     # anisotropic: the scale differs per axis
     np.testing.assert_allclose(
-        to_original([[2.0, 2.0]], (50, 40), (100, 160)), [[9.5, 4.5]], rtol=0, atol=1e-12
+        frame_of((50, 40), (100, 160)).to_original([[2.0, 2.0]]), [[9.5, 4.5]], rtol=0, atol=1e-12
     )
-    assert to_original(np.zeros((0, 2)), small, big).shape == (0, 2)
+    assert frame_of(small, big).to_original(np.zeros((0, 2))).shape == (0, 2)
 
 
 def test_resize_then_map_back_agrees_with_opencv_on_a_ramp():
-    """Shrinking x / y ramps by 2: resized pixel j holds exactly the original coordinate to_original gives."""
+    """Shrinking x / y ramps by 2: resized pixel j holds exactly the original coordinate its frame gives."""
     xs, ys = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
     small = resize_to(np.stack([xs, ys, xs], -1), (H // 2, W // 2))
     jx, jy = np.meshgrid(np.arange(W // 2), np.arange(H // 2))
-    mapped = to_original(np.stack([jx.ravel(), jy.ravel()], 1), (H // 2, W // 2), (H, W))
+    mapped = frame_of((H // 2, W // 2), (H, W)).to_original(np.stack([jx.ravel(), jy.ravel()], 1))
     np.testing.assert_array_equal(small[..., 0].ravel(), mapped[:, 0])
     np.testing.assert_array_equal(small[..., 1].ravel(), mapped[:, 1])
 

@@ -17,9 +17,10 @@ from .config import MatchConfig, make_config
 from .errors import ConfigError, ImageError, caused_by_interrupt
 from .features.descriptors import resolve_descriptor
 from .geometry.backends import estimate_geometry
+from .geometry.frames import Frame
 from .io import MIN_IMAGE_SIDE, ImageLike, load_image
 from .pipelines import PIPELINES, make_base_pipeline
-from .resize import resize_image, to_original
+from .resize import resize_image
 from .result import MatchResult
 from .slime.level_cache import LevelCache
 from .slime.pipeline import run_slime, stages_to_original
@@ -96,7 +97,7 @@ class Matcher:
         config = self.config
         with timer("load"):
             original0, original1 = load_image(image0), load_image(image1)
-            (array0, scale0), (array1, scale1) = (_working_image(image, config.max_side)
+            (array0, frame0), (array1, frame1) = (_working_image(image, config.max_side)
                                                   for image in (original0, original1))
         stages = None
         warnings = list(self.warnings)
@@ -107,10 +108,10 @@ class Matcher:
             warnings += output.warnings
         else:
             xy0, xy1, scores, counts = self._run_base(array0, array1, timer)
-        if (scale0, scale1) != ((1.0, 1.0), (1.0, 1.0)):
-            xy0, xy1 = to_original(xy0, scale0), to_original(xy1, scale1)
+        if (frame0, frame1) != (Frame(), Frame()):
+            xy0, xy1 = frame0.to_original(xy0), frame1.to_original(xy1)
             if stages is not None:
-                stages = stages_to_original(stages, scale0, scale1)
+                stages = stages_to_original(stages, frame0, frame1)
         inliers = model = kind = None
         if config.ransac != "none":
             backend, _, kind = config.ransac.rpartition("-")
@@ -147,14 +148,14 @@ class Matcher:
         return xy0, xy1, matches.scores, counts
 
 
-def _working_image(image: np.ndarray, max_side: int | None) -> tuple[np.ndarray, tuple[float, float]]:
-    """The (H, W, 3) image shrunk to ``max_side`` (see :func:`resize_image`) and its (sx, sy) factors."""
-    working, scale = resize_image(image, max_side)
+def _working_image(image: np.ndarray, max_side: int | None) -> tuple[np.ndarray, Frame]:
+    """The (H, W, 3) image shrunk to ``max_side`` (see :func:`resize_image`) and its frame."""
+    working, frame = resize_image(image, max_side)
     height, width = working.shape[:2]
     if min(height, width) < MIN_IMAGE_SIDE:
         raise ImageError(f"a {image.shape[1]}x{image.shape[0]} px image shrunk to max_side {max_side} would be "
                          f"{width}x{height} px, smaller than {MIN_IMAGE_SIDE} px on a side: raise max_side")
-    return working, scale
+    return working, frame
 
 
 def match(image0: ImageLike, image1: ImageLike, method: str | MatchConfig = "slime", **options: Any) -> MatchResult:

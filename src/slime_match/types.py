@@ -91,6 +91,18 @@ class Features:
         shape_laf = None if self.shape_laf is None else self.shape_laf.to(device)
         return Features(self.laf.to(device), self.descriptors.to(device), self.response.to(device), shape_laf)
 
+    def moved(self, offset: tuple[float, float]) -> Features:
+        """The same features moved by ``offset`` (x, y) px, LAF and shape-frame centres alike: from one pixel
+        frame to another (:class:`~slime_match.geometry.frames.Frame`) cut at a different corner."""
+        shift = torch.tensor(offset, dtype=self.laf.dtype, device=self.laf.device)
+        laf = self.laf.clone()
+        laf[:, :, 2] += shift
+        shape_laf = None
+        if self.shape_laf is not None:
+            shape_laf = self.shape_laf.clone()
+            shape_laf[:, :, 2] += shift
+        return Features(laf, self.descriptors, self.response, shape_laf)
+
 
 @dataclass
 class Matches:

@@ -10,7 +10,7 @@ from slime_match.eval.datasets import load_dataset
 from slime_match.eval.datasets.pair import Pair, fundamental_from_pose, rotated_pair, scale_intrinsics
 from slime_match.geometry.fundamental import epipolar_distance
 from slime_match.geometry.homography import project
-from slime_match.resize import resize_image, to_original
+from slime_match.resize import resize_image
 
 from .helpers import rot, same_up_to_scale, texture, two_view_points
 
@@ -77,13 +77,13 @@ def test_rotated_pose_pair_updates_camera(angle):
 
 def test_scale_intrinsics_follows_the_protocol_resize():
     img = np.zeros((968, 1296, 3), np.uint8)
-    small, scale = resize_image(img, size=(640, 480))
-    assert small.shape == (480, 640, 3) and scale == pytest.approx((1296 / 640, 968 / 480))
+    small, frame = resize_image(img, size=(640, 480))
+    assert small.shape == (480, 640, 3) and frame.factor == pytest.approx((640 / 1296, 480 / 968))
     K = np.array([[1163.0, 0, 653.6], [0, 1164.8, 481.6], [0, 0, 1]])
     X = np.array([[0.3, -0.2, 2.0], [-0.5, 0.1, 3.0]])
     p_orig = X @ K.T
-    p_small = X @ scale_intrinsics(K, scale).T
-    back = to_original(p_small[:, :2] / p_small[:, 2:], scale)
+    p_small = X @ scale_intrinsics(K, frame).T
+    back = frame.to_original(p_small[:, :2] / p_small[:, 2:])
     assert np.allclose(back, p_orig[:, :2] / p_orig[:, 2:])
 
 

@@ -37,7 +37,7 @@ from slime_match.geometry.backends import estimate_geometry
 from slime_match.geometry.fundamental import fundamental_8point
 from slime_match.geometry.homography import homography_dlt
 from slime_match.io import load_image, load_npz, save_json, save_npz
-from slime_match.resize import resize_image, to_original
+from slime_match.resize import resize_image
 
 logger = logging.getLogger("slime_match")
 
@@ -133,11 +133,11 @@ def load_pair_images(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
 def predict(method, pair: Pair, images: tuple[np.ndarray, np.ndarray]) -> dict[str, np.ndarray]:
     """Run a method on a pair under the protocol resize; keypoints come back in the original frame, with the
     matching seconds and the :func:`code_version` that computed them."""
-    (im0, s0), (im1, s1) = (resize_image(im, pair.max_side, pair.size) for im in images)
+    (im0, frame0), (im1, frame1) = (resize_image(im, pair.max_side, pair.size) for im in images)
     xy0, xy1, scores, seconds = method(im0, im1)
     return {
-        "keypoints0": to_original(np.asarray(xy0, np.float64).reshape(-1, 2), s0),
-        "keypoints1": to_original(np.asarray(xy1, np.float64).reshape(-1, 2), s1),
+        "keypoints0": frame0.to_original(np.asarray(xy0, np.float64).reshape(-1, 2)),
+        "keypoints1": frame1.to_original(np.asarray(xy1, np.float64).reshape(-1, 2)),
         "scores": np.asarray(scores, np.float64).reshape(-1),
         "seconds": np.float64(seconds),
         "code": np.str_(code_version()),

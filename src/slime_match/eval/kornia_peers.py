@@ -21,7 +21,7 @@ Conventions:
       LightGlue matches them; scores are ``1 - LightGlue's matching score`` (kornia's ``scores``, in [0, 1], only
       matches above ``threshold`` are returned).
     - Resizing uses OpenCV (area when shrinking), whose pixel grid maps pixel centre ``x`` of the resized image to
-      ``(x + 0.5) * W / w - 0.5`` of the original; :func:`to_original` applies that per axis.
+      ``(x + 0.5) * W / w - 0.5`` of the original; :func:`frame_of` maps that per axis.
 """
 
 from __future__ import annotations
@@ -49,6 +49,7 @@ from slime_match.eval.method_base import (
     synchronize,
     to_grey,
 )
+from slime_match.geometry.frames import Frame
 from slime_match.matcher import resolve_device
 
 logger = logging.getLogger("slime_match")
@@ -69,7 +70,7 @@ def fit_size(height: int, width: int, max_side: int, multiple: int = 1) -> tuple
     """Size (h, w) of the resized image: longest side <= max_side, both sides multiples of ``multiple``.
 
     The image is only shrunk to meet ``max_side`` (0 = no limit); rounding each side to the nearest multiple
-    may then change its aspect ratio slightly, which :func:`to_original` undoes per axis.
+    may then change its aspect ratio slightly, which :func:`frame_of`'s ``to_original`` undoes per axis.
 
     Args:
         height, width: original size in pixels.
@@ -97,15 +98,10 @@ def resize_to(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return cv2.resize(np.ascontiguousarray(image, dtype=np.float32), (w, h), interpolation=interpolation)
 
 
-def to_original(xy: np.ndarray, size: tuple[int, int], original: tuple[int, int]) -> np.ndarray:
-    """Map (K, 2) pixel positions (x, y) of an image resized to ``size`` = (h, w) back to ``original`` = (H, W).
-
-    Pixel centres are integers in both frames and the image edges coincide, so
-    ``x_original = (x + 0.5) * W / w - 0.5`` (and likewise for y).
-    """
-    (h, w), (height, width) = size, original
-    scale = np.array([width / w, height / h])
-    return (np.asarray(xy, dtype=np.float64).reshape(-1, 2) + 0.5) * scale - 0.5
+def frame_of(size: tuple[int, int], original: tuple[int, int]) -> Frame:
+    """The frame of an image of ``original`` = (H, W) px resized to ``size`` = (h, w) (pixel centres are
+    integers in both and the image edges coincide)."""
+    return Frame.of_sizes(size[::-1], original[::-1])
 
 
 # --------------------------------------------------------------------------------------------- weights
@@ -244,8 +240,8 @@ class KorniaLoFTR:
         (t0, size0), (t1, size1) = self._prepare(image0), self._prepare(image1)
         out = self._model({"image0": t0, "image1": t1})
         # kornia's LoFTR frame puts pixel centres at +0.5: shift to integer centres, then undo the resize
-        xy0 = to_original(_numpy(out["keypoints0"]) - 0.5, size0, image0.shape[:2])
-        xy1 = to_original(_numpy(out["keypoints1"]) - 0.5, size1, image1.shape[:2])
+        xy0 = frame_of(size0, image0.shape[:2]).to_original(_numpy(out["keypoints0"]).reshape(-1, 2) - 0.5)
+        xy1 = frame_of(size1, image1.shape[:2]).to_original(_numpy(out["keypoints1"]).reshape(-1, 2) - 0.5)
         scores = 1.0 - _numpy(out["confidence"]).reshape(-1)
         synchronize()
         return xy0, xy1, scores, time.perf_counter() - start
@@ -332,8 +328,8 @@ class KorniaDiskLightGlue:
 
             out = self._lightglue({"image0": side(k0, d0, size0), "image1": side(k1, d1, size1)})
             idx = out["matches"][0].cpu().numpy()
-            xy0 = to_original(_numpy(k0)[idx[:, 0]], size0, image0.shape[:2])
-            xy1 = to_original(_numpy(k1)[idx[:, 1]], size1, image1.shape[:2])
+            xy0 = frame_of(size0, image0.shape[:2]).to_original(_numpy(k0)[idx[:, 0]].reshape(-1, 2))
+            xy1 = frame_of(size1, image1.shape[:2]).to_original(_numpy(k1)[idx[:, 1]].reshape(-1, 2))
             scores = 1.0 - _numpy(out["scores"][0]).reshape(-1)
         synchronize()
         return xy0, xy1, scores, time.perf_counter() - start

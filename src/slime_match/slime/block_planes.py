@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..geometry.frames import stack_matrices
 from ..geometry.homography import project
 from ..geometry.ransac import HomographyRansacConfig
 from ..pipelines import BasePipeline
@@ -182,16 +183,6 @@ def _collect(pairs, hs, thetas, parts) -> BlockPairMatches:
                             cat["xy0"], cat["xy1"], cat["s0"], cat["s1"], cat["score"])
 
 
-def _scaling(blocks: list[Block], index: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) maps original px -> scaled px of the blocks ``index`` (pixel-centre convention)."""
-    fx = np.array([blocks[i].fx for i in index])
-    fy = np.array([blocks[i].fy for i in index])
-    s = np.zeros((len(index), 3, 3))
-    s[:, 0, 0], s[:, 1, 1], s[:, 2, 2] = fx, fy, 1.0
-    s[:, 0, 2], s[:, 1, 2] = 0.5 * fx - 0.5, 0.5 * fy - 0.5
-    return s
-
-
 def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks1: list[Block]
                              ) -> tuple[MatchTable, np.ndarray, np.ndarray]:
     """Block-pair matches and homographies in original-image pixels (Sec. 3.4's reference frame).
@@ -200,8 +191,8 @@ def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks
         The match table (theta = 0 in image 0 and theta* of its plane in image 1, as forced by Sec. 3.3),
         (L, 3, 3) homographies original image 0 -> original image 1, and (L,) plane sides.
     """
-    s0 = _scaling(blocks0, bpm.pairs[:, 0])
-    s1 = _scaling(blocks1, bpm.pairs[:, 1])
+    s0 = stack_matrices([blocks0[i].level_frame for i in bpm.pairs[:, 0]])  # original px -> level px
+    s1 = stack_matrices([blocks1[i].level_frame for i in bpm.pairs[:, 1]])
     h = np.linalg.inv(s1) @ bpm.H @ s0
     pair = bpm.match_pair
     f0 = np.sqrt(s0[:, 0, 0] * s0[:, 1, 1])[pair]

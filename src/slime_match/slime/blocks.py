@@ -40,6 +40,7 @@ import scipy.sparse as sp
 
 from slime_match.errors import ConfigError
 from slime_match.features.image_ops import scaled_size
+from slime_match.geometry.frames import Frame
 
 __all__ = [
     "Block",
@@ -125,23 +126,15 @@ class Block:
         """(height, width) of the block image in px."""
         return self.box[3] - self.box[1], self.box[2] - self.box[0]
 
-    def to_scaled(self, xy: np.ndarray) -> np.ndarray:
-        """(N, 2) original px -> (N, 2) scaled-image px."""
-        xy = np.asarray(xy, dtype=np.float64)
-        return (xy + 0.5) * np.array([self.fx, self.fy]) - 0.5
+    @property
+    def level_frame(self) -> Frame:
+        """The frame of the whole scaled image (the block's level)."""
+        return Frame((self.fx, self.fy))
 
-    def to_original(self, xy: np.ndarray) -> np.ndarray:
-        """(N, 2) scaled-image px -> (N, 2) original px."""
-        xy = np.asarray(xy, dtype=np.float64)
-        return (xy + 0.5) / np.array([self.fx, self.fy]) - 0.5
-
-    def local_to_original(self, xy: np.ndarray) -> np.ndarray:
-        """(N, 2) px in the block image (as returned by :meth:`crop`) -> (N, 2) original px."""
-        return self.to_original(np.asarray(xy, dtype=np.float64) + np.array(self.box[:2], dtype=np.float64))
-
-    def original_to_local(self, xy: np.ndarray) -> np.ndarray:
-        """(N, 2) original px -> (N, 2) px in the block image."""
-        return self.to_scaled(xy) - np.array(self.box[:2], dtype=np.float64)
+    @property
+    def frame(self) -> Frame:
+        """The frame of the block image (:meth:`crop`): the level cut at the box corner."""
+        return Frame((self.fx, self.fy), (float(self.box[0]), float(self.box[1])))
 
     def in_core_local(self, xy: np.ndarray) -> np.ndarray:
         """(N,) bool: block-image points (N, 2) that fall in the core (see :func:`points_in_blocks`)."""

@@ -16,7 +16,6 @@ from .._runtime.forking import fork_map
 from ..features.laf import set_laf_angle
 from ..pipelines import BasePipeline
 from ..types import Features
-from .frames import translate_features
 from .jobs import device_workers, piece_size, pieces_of
 from .levels import ScaleLevel
 
@@ -77,7 +76,7 @@ class FixedDescriptors:
             level, bin_index, missing = tasks[k]
             regions = level.features.subset(torch.from_numpy(missing))
             if level.origin != (0.0, 0.0):
-                regions = translate_features(regions, (-level.origin[0], -level.origin[1]))
+                regions = regions.moved((-level.origin[0], -level.origin[1]))
             fresh = pipeline.describe_fixed(level.context, regions, bin_index * 2 * math.pi / bins).descriptors
             return fresh.detach().cpu().numpy() if forked else fresh.detach()  # no device round trip in-process
 

@@ -20,7 +20,6 @@ from ..geometry.ransac import HomographyRansacConfig, ransac_homography_many
 from ..pipelines import BasePipeline, CandidateFilter
 from ..types import Features, Matches
 from .blocks import Block
-from .frames import to_block_frame
 
 __all__ = [
     "JobMatches",
@@ -120,7 +119,7 @@ def _match_job(pipeline: BasePipeline, job: MatchJob | None) -> JobMatches:
     if job is None or len(job[0]) < 4 or len(job[1]) < 4:
         return Matches.empty(), np.zeros((0, 2)), np.zeros((0, 2))
     f0, f1, b0, b1, candidate_filter = job
-    m = pipeline.match(to_block_frame(f0, b0), to_block_frame(f1, b1), b0.shape, b1.shape,
+    m = pipeline.match(f0.moved((-b0.box[0], -b0.box[1])), f1.moved((-b1.box[0], -b1.box[1])), b0.shape, b1.shape,
                        candidate_filter=candidate_filter)
     xy0, xy1 = (f.xy.detach().cpu().numpy().astype(np.float64) for f in (f0, f1))
     return m, xy0[m.idx0], xy1[m.idx1]

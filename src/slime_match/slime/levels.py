@@ -30,7 +30,6 @@ from ..pipelines import BasePipeline
 from ..types import Features, Keypoints
 from .blocks import Block, points_in_blocks
 from .clusters import greedy_clusters
-from .frames import translate_features
 from .jobs import (
     device_workers,
     features_from_numpy,
@@ -254,10 +253,10 @@ def _level(d: _Detection, features: Features, blocks: list[Block]) -> ScaleLevel
     if d.block is not None:  # a block crop: keep its core's features, in scaled-image pixels
         inside = d.block.in_core_local(features.xy.detach().cpu().numpy())
         origin = (float(d.block.box[0]), float(d.block.box[1]))
-        features = translate_features(features.subset(torch.from_numpy(inside).to(features.laf.device)), origin)
+        features = features.subset(torch.from_numpy(inside).to(features.laf.device)).moved(origin)
         return ScaleLevel(factor, d.scaled.shape[:2], d.context, features, d.blocks, [np.arange(len(features))],
                           origin=origin)
-    original = blocks[d.blocks[0]].to_original(features.xy.detach().cpu().numpy())
+    original = blocks[d.blocks[0]].level_frame.to_original(features.xy.detach().cpu().numpy())
     inside = points_in_blocks(original, [blocks[i] for i in d.blocks])
     members = [inside.indices[inside.indptr[k]:inside.indptr[k + 1]] for k in range(len(d.blocks))]
     return ScaleLevel(factor, d.scaled.shape[:2], d.context, features, d.blocks, members)

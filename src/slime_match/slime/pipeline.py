@@ -22,9 +22,9 @@ from .._runtime.cpus import available_cpus
 from .._runtime.forking import torch_threads
 from .._runtime.timing import StageTimer
 from ..geometry import ransac_kernels
+from ..geometry.frames import Frame, homographies_to_original
 from ..geometry.ransac import HomographyRansacConfig
 from ..pipelines import BasePipeline
-from ..resize import homography_to_original, to_original
 from .block_planes import block_planes
 from .blocks import Block, BlockConfig, make_blocks, make_tiles
 from .diagnostics import empty_result_reason, layout_warning, tile_count_warning
@@ -208,25 +208,24 @@ def _boxes_original(blocks: list[Block]) -> np.ndarray:
     """(n, 5) [x0, y0, x1, y1, scale_index] of block cores in original px."""
     out = np.zeros((len(blocks), 5))
     for i, b in enumerate(blocks):
-        lo = b.to_original(np.array([[b.core[0] - 0.5, b.core[1] - 0.5]]))[0]
-        hi = b.to_original(np.array([[b.core[2] - 0.5, b.core[3] - 0.5]]))[0]
+        lo = b.level_frame.to_original(np.array([[b.core[0] - 0.5, b.core[1] - 0.5]]))[0]
+        hi = b.level_frame.to_original(np.array([[b.core[2] - 0.5, b.core[3] - 0.5]]))[0]
         out[i] = [*lo, *hi, b.scale_index]
     return out
 
 
-def stages_to_original(
-    stages: dict[str, np.ndarray], scale0: tuple[float, float], scale1: tuple[float, float]
-) -> dict[str, np.ndarray]:
-    """Stage arrays of images matched resized by (sx, sy) = original / resized, in original-image pixels:
-    points, block and tile boxes and plane homographies (orientations stay as measured when matching)."""
+def stages_to_original(stages: dict[str, np.ndarray], frame0: Frame, frame1: Frame) -> dict[str, np.ndarray]:
+    """Stage arrays of images matched in working frames ``frame0``, ``frame1`` (``resize.resize_image``), in
+    original-image pixels: points, block and tile boxes and plane homographies (orientations stay as measured
+    when matching)."""
     out = dict(stages)
-    for image, scale in ((0, scale0), (1, scale1)):
+    for image, frame in ((0, frame0), (1, frame1)):
         for key, value in stages.items():
             if key.endswith(f"_xy{image}"):
-                out[key] = to_original(value, scale)
+                out[key] = frame.to_original(value)
         for key in (f"blocks{image}", f"tiles{image}"):
             boxes = stages[key].copy()
-            boxes[:, 0:2], boxes[:, 2:4] = to_original(boxes[:, 0:2], scale), to_original(boxes[:, 2:4], scale)
+            boxes[:, 0:2], boxes[:, 2:4] = frame.to_original(boxes[:, 0:2]), frame.to_original(boxes[:, 2:4])
             out[key] = boxes
-    out["planes_H"] = homography_to_original(stages["planes_H"], scale0, scale1)
+    out["planes_H"] = homographies_to_original(stages["planes_H"], frame0, frame1)
     return out

@@ -6,8 +6,8 @@ image 1, ``F`` satisfies ``x1^T F x0 = 0``, ``(R, t)`` maps camera-0 coordinates
 (``X1 = R X0 + t``), masks are boolean with True = excluded.
 
 Protocol resizing (MegaDepth longest side <= 1200 px, ScanNet 640x480) is described by ``Pair.max_side`` /
-``Pair.size``; :func:`slime_match.resize.resize_image` resizes an image accordingly and returns the factors
-that :func:`slime_match.resize.to_original` uses to bring coordinates back to the original frame.
+``Pair.size``; :func:`slime_match.resize.resize_image` resizes an image accordingly and returns its frame,
+whose ``to_original`` brings coordinates back to the original frame.
 
 Modules: :mod:`.pair` (the Pair, GT geometry, rotated views), :mod:`.files` (folder reading helpers), one
 reader module per format family (:mod:`.planar`, :mod:`.wxbs`, :mod:`.pose`, :mod:`.motorcycle`) and

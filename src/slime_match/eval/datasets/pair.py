@@ -13,7 +13,7 @@ import scipy.linalg
 
 from slime_match.errors import ConfigError
 from slime_match.eval.datasets.files import read_image
-from slime_match.resize import to_original_matrix
+from slime_match.geometry.frames import Frame
 
 KINDS = ("homography", "fundamental", "pose", "disparity")
 
@@ -90,9 +90,9 @@ def fundamental_from_corrs(corrs: np.ndarray) -> np.ndarray:
 # intrinsics of a protocol-resized frame
 
 
-def scale_intrinsics(K: np.ndarray, scale: tuple[float, float]) -> np.ndarray:
-    """(3, 3) intrinsics of the resized frame, given original-frame ``K`` and (sx, sy) = original/resized."""
-    return np.linalg.inv(to_original_matrix(scale)) @ K
+def scale_intrinsics(K: np.ndarray, frame: Frame) -> np.ndarray:
+    """(3, 3) intrinsics of a resized ``frame`` (``resize.resize_image``), given original-frame ``K``."""
+    return frame.matrix() @ K
 
 
 # ----------------------------------------------------------------------------------------------------------
