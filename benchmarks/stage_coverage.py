@@ -40,11 +40,12 @@ from slime_match.eval.datasets import load_dataset, rotated_pair
 from slime_match.eval.methods import parse_method_spec
 from slime_match.eval.metrics import correct_matches_homography, coverage, valid_area_homography
 from slime_match.features.harrisz import detect_harrisz
+from slime_match.geometry.frames import Frame
 from slime_match.geometry.homography import project
 from slime_match.io import load_image, to_tensor
 from slime_match.matcher import Matcher
 from slime_match.matching.dtm import DTMConfig
-from slime_match.resize import resize_image, to_original
+from slime_match.resize import resize_image
 from slime_match.slime.refine import CLUSTER_RADIUS, FlowGuide, global_dtm, merge_duplicates
 
 STAGES = ("block_matches", "expanded", "superset", "epipolar", "fbar", "ftheta", "tile_matches", "dtm_input",
@@ -91,11 +92,12 @@ def stage_matches(stages: dict[str, np.ndarray]) -> dict[str, tuple[np.ndarray, 
     }
 
 
-def guided_bound(repeatable: tuple[np.ndarray, np.ndarray], ftheta: tuple[np.ndarray, np.ndarray], scale0, scale1,
+def guided_bound(repeatable: tuple[np.ndarray, np.ndarray], ftheta: tuple[np.ndarray, np.ndarray], frame0: Frame,
+                 frame1: Frame,
                  t: float = 15.0) -> tuple[np.ndarray, np.ndarray]:
-    """F^theta's matches (matcher frame, mapped to original pixels with ``to_original``) plus the repeatable
+    """F^theta's matches (working frames ``frame0``, ``frame1``, mapped to original pixels) plus the repeatable
     matches (original pixels) within ``t`` px of one of them at both ends: (N, 2), (N, 2) original pixels."""
-    g0, g1 = to_original(ftheta[0], scale0), to_original(ftheta[1], scale1)
+    g0, g1 = frame0.to_original(ftheta[0]), frame1.to_original(ftheta[1])
     near = FlowGuide(g0, g1, t)(*repeatable)
     return np.r_[g0, repeatable[0][near]], np.r_[g1, repeatable[1][near]]
 
@@ -134,7 +136,7 @@ def pair_row(pair, slime: Matcher, base: Matcher, dtm_variants: Sequence[str] = 
 
     def score(x0: np.ndarray, x1: np.ndarray, frame: bool = True) -> dict[str, float]:
         if frame:
-            x0, x1 = to_original(x0, s0), to_original(x1, s1)
+            x0, x1 = s0.to_original(x0), s1.to_original(x1)
         ok = correct_matches_homography(x0, x1, pair.H, mask0=pair.mask0, mask1=pair.mask1)
         cov = coverage(x0[ok], x1[ok], image0.shape[:2], image1.shape[:2], valid0, valid1)
         return {"matches": len(ok), "correct": int(ok.sum()), "precision": float(ok.mean()) if len(ok) else 0.0,
