@@ -93,8 +93,7 @@ def stage_matches(stages: dict[str, np.ndarray]) -> dict[str, tuple[np.ndarray, 
 
 
 def guided_bound(repeatable: tuple[np.ndarray, np.ndarray], ftheta: tuple[np.ndarray, np.ndarray], frame0: Frame,
-                 frame1: Frame,
-                 t: float = 15.0) -> tuple[np.ndarray, np.ndarray]:
+                 frame1: Frame, t: float = 15.0) -> tuple[np.ndarray, np.ndarray]:
     """F^theta's matches (working frames ``frame0``, ``frame1``, mapped to original pixels) plus the repeatable
     matches (original pixels) within ``t`` px of one of them at both ends: (N, 2), (N, 2) original pixels."""
     g0, g1 = frame0.to_original(ftheta[0]), frame1.to_original(ftheta[1])
