@@ -19,12 +19,12 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from conftest import DATA, require  # noqa: E402
+from conftest import DATA, require
 
-from slime_match.config import make_config  # noqa: E402
-from slime_match.eval.datasets import rotate_image  # noqa: E402
-from slime_match.io import load_image  # noqa: E402
-from slime_match.matcher import Matcher  # noqa: E402
+from slime_match.config import make_config
+from slime_match.eval.datasets import rotate_image
+from slime_match.io import load_image
+from slime_match.matcher import Matcher
 
 FIXTURE = Path(__file__).resolve().parent / "data" / "identical_matches.json"
 WEIGHT_FREE = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift"}
