@@ -79,9 +79,9 @@ def record_calls(path: Path) -> int:
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from bench_slime import WEIGHT_FREE, load_pair
 
-    from slime_match import pipelines
     from slime_match.config import make_config
     from slime_match.matcher import Matcher
+    from slime_match.pipelines import hzplus
 
     calls = []
 
@@ -93,11 +93,11 @@ def record_calls(path: Path) -> int:
         return res
 
     a, b, _ = load_pair(ROOT.parent / "shared" / "data", 640, 480)
-    pipelines.dtm_filter = recording
+    hzplus.dtm_filter = recording
     try:
         Matcher(make_config("slime", workers=1, **WEIGHT_FREE))(a, b)
     finally:
-        pipelines.dtm_filter = dtm.dtm_filter
+        hzplus.dtm_filter = dtm.dtm_filter
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "wb") as f:
         pickle.dump(calls, f)

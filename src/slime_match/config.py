@@ -10,7 +10,7 @@ from typing import Any
 
 from .errors import ConfigError
 from .io import MIN_IMAGE_SIDE
-from .pipelines import BASE_NAMES, PIPELINES, BaseConfig
+from .pipelines import BASE_NAMES, PIPELINES, BaseConfig, base_names, unimplemented
 from .slime.levels import DETECTIONS
 from .slime.pipeline import SlimeConfig
 from .slime.refine import TILE_TESTS
@@ -26,7 +26,8 @@ class MatchConfig:
 
     Attributes:
         method: "slime" (Slime on top of ``base``), or a base pipeline alone: "hz+" / "rootsift" / "keynet".
-        base: the base pipeline options (for Slime: the pipeline run on blocks and tiles).
+        base: the base pipeline options (for Slime: the pipeline run on blocks and tiles; ``base.name`` may
+            name a pipeline added with ``slime_match.pipelines.register_pipeline``).
         slime: Slime's parameters (the paper's defaults).
         ransac: post-processing robust estimation: "none", "homography" / "fundamental" (the paper's
             RANSACs), "magsac-*" (OpenCV MAGSAC++) or "poselib-*".
@@ -48,7 +49,10 @@ class MatchConfig:
 
     def validate(self) -> MatchConfig:
         _choice("method", self.method, METHODS)
-        _choice("base", self.base.name, BASE_NAMES)
+        _choice("base", self.base.name, base_names())
+        if self.method == "slime" and (missing := unimplemented(PIPELINES[self.base.name], slime=True)):
+            raise ConfigError(f"Slime cannot run on the {self.base.name} base pipeline: it does not implement "
+                              f"{'; '.join(missing)}")
         _choice("ransac", self.ransac, RANSAC_CHOICES)
         _choice("descriptor", self.base.descriptor, ("auto", "hardnet", "tfeat", "rootsift"))
         _choice("shape", self.base.shape, ("affnet", "baumberg"))

@@ -1,0 +1,15 @@
+"""Base matching pipelines (Hz+, RootSIFT and Key.Net) behind one interface, registered by name.
+
+:mod:`.base` defines the interface (:class:`BasePipeline`: ``extract`` and ``match``, and Slime's hooks),
+:mod:`.hzplus`, :mod:`.rootsift` and :mod:`.keynet` the built-in pipelines, :mod:`.registry` the names.
+"""
+
+from .base import BaseConfig, BasePipeline, CandidateFilter, unimplemented
+from .hzplus import HzPlusPipeline
+from .keynet import KeyNetPipeline
+from .registry import BASE_NAMES, PIPELINES, base_names, make_base_pipeline, register_pipeline
+from .rootsift import RootSiftPipeline
+
+__all__ = ["BASE_NAMES", "PIPELINES", "BaseConfig", "BasePipeline", "CandidateFilter", "HzPlusPipeline",
+           "KeyNetPipeline", "RootSiftPipeline", "base_names", "make_base_pipeline", "register_pipeline",
+           "unimplemented"]
