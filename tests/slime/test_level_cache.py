@@ -1,14 +1,16 @@
 """The feature cache: Slime's block and tile features of an image reused by the next pairs, same matches."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from conftest import run_cli
 
 from slime_match import Matcher, load_image, make_config
 from slime_match.errors import ConfigError
-from slime_match.slime.block_matching import LevelRequest, ScaleLevel
 from slime_match.slime.blocks import BlockConfig, make_blocks
 from slime_match.slime.level_cache import LevelCache, nbytes, request_key
+from slime_match.slime.levels import LevelRequest, ScaleLevel
 
 WEIGHT_FREE_SMALL = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift", "scales": (1,)}
 
@@ -25,13 +27,16 @@ def test_nbytes_counts_each_array_once():
     assert nbytes({"a": [shared, (shared,)], "b": 3}) == 100
 
 
-def test_get_put_eviction_and_fresh_fixed_caches():
+def test_get_put_eviction_and_the_same_immutable_levels():
     cache = LevelCache(budget_bytes=250)
     cache.put("a", _levels(100))
     cache.put("b", _levels(100))
     first = cache.get("a")  # "a" becomes the most recently used
-    first[0].fixed[3] = "filled by a pair"
-    assert cache.get("a")[0].fixed == {}  # each use starts with an empty fixed-orientation cache
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        first[0].members = ["changed by a pair"]
+    assert not hasattr(first[0], "fixed")  # no per-pair cache: FixedDescriptors holds a stage's descriptors
+    again = cache.get("a")
+    assert again is first and again[0] is first[0]  # each use gets the same levels back, unchanged
     cache.put("c", _levels(100))  # over budget: "b", the least recently used, goes
     assert cache.get("b") is None and cache.get("c") is not None and len(cache) == 2
     assert cache.size_bytes == 200 and (cache.hits, cache.misses) == (3, 1)
