@@ -12,11 +12,13 @@ from slime_match.geometry.ransac import HomographyRansacConfig
 from slime_match.pipelines import BaseConfig, make_base_pipeline
 from slime_match.slime.block_planes import (
     BlockPairMatches,
+    block_planes,
     block_planes_to_original,
     match_block_pairs,
 )
 from slime_match.slime.blocks import make_blocks
 from slime_match.slime.levels import build_levels
+from slime_match.slime.match_table import deduplicate
 
 from .helpers import SIZE, WEIGHT_FREE, squares
 
@@ -75,3 +77,33 @@ def test_upright_base_reuses_the_first_run_for_the_orientation_refined_one(monke
     assert full_counts["block_pairs_rerun"] == full_counts["block_planes_first"] == counts["block_planes_first"]
     for field in dataclasses.fields(full):
         np.testing.assert_array_equal(getattr(reused, field.name), getattr(full, field.name))
+
+
+def test_block_planes_gathers_the_refined_planes_in_original_pixels(levels):
+    """``block_planes`` is ``match_block_pairs``, ``block_planes_to_original`` and ``deduplicate`` in a row:
+    the same planes, raw and deduplicated tables, their counts, and their ``--save-stages`` arrays."""
+    pipeline, blocks, _, _, _ = levels
+    image, moved = _moved_squares()
+    levels0, levels1 = build_levels(pipeline, image, blocks), build_levels(pipeline, moved, blocks)
+    ransac = HomographyRansacConfig(threshold=15.0)
+    planes = block_planes(pipeline, levels0, levels1, blocks, blocks, ransac)
+    matches, counts = match_block_pairs(pipeline, levels0, levels1, blocks, blocks, ransac)
+    raw, h, side = block_planes_to_original(matches, blocks, blocks)
+    table, _ = deduplicate(raw)
+    assert counts["block_planes"] > 0 and len(raw) > len(table) > 0  # overlapping blocks: duplicate matches
+    for field in dataclasses.fields(matches):
+        np.testing.assert_array_equal(getattr(planes.level_matches, field.name), getattr(matches, field.name))
+    for field in dataclasses.fields(raw):
+        np.testing.assert_array_equal(getattr(planes.raw, field.name), getattr(raw, field.name))
+        np.testing.assert_array_equal(getattr(planes.table, field.name), getattr(table, field.name))
+    np.testing.assert_array_equal(planes.H, h)
+    np.testing.assert_array_equal(planes.side, side)
+    assert planes.counts == {**counts, "block_matches": len(raw), "block_matches_unique": len(table)}
+    arrays = planes.arrays()
+    assert set(arrays) == {"planes_pairs", "planes_H", "planes_theta", "block_matches_xy0",
+                           "block_matches_xy1", "block_matches_plane", "table_xy0", "table_xy1",
+                           "table_weight"}
+    np.testing.assert_array_equal(arrays["planes_pairs"], matches.pairs)
+    np.testing.assert_array_equal(arrays["block_matches_plane"], raw.source)
+    np.testing.assert_array_equal(arrays["table_weight"], table.weight)
+    assert arrays["table_weight"].sum() == len(raw)

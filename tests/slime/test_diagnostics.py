@@ -3,6 +3,7 @@
 from slime_match.slime.blocks import make_tiles
 from slime_match.slime.diagnostics import (
     MANY_BLOCK_PAIRS,
+    MANY_TILES,
     empty_result_reason,
     layout_warning,
     tile_count_warning,
@@ -36,3 +37,25 @@ def test_tile_count_warning_names_max_side():
     assert tile_count_warning(len(make_tiles(1536, 2048)), 12) is None
     message = tile_count_warning(12, len(make_tiles(2560, 3200)))
     assert "12 and 357 tiles" in message and "--max-side" in message
+
+
+def test_tile_count_warning_from_more_than_many_tiles_in_either_image():
+    assert tile_count_warning(MANY_TILES, MANY_TILES) is None
+    assert "151 and 3 tiles" in tile_count_warning(MANY_TILES + 1, 3)
+    assert "3 and 151 tiles" in tile_count_warning(3, MANY_TILES + 1)
+    assert tile_count_warning(len(make_tiles(1536, 2048)), 1) is None  # 2048 x 1536 still passes
+
+
+def test_empty_result_reason_follows_the_stage_counts():
+    """The reason names the first stage that kept nothing, in paper order; the vote's message depends on
+    whether t_xi |H| votes are reachable (|H| - 1 > t_xi) with the configured t_xi."""
+    tiles = TileConfig(t_xi=3.0)
+    reachable = empty_result_reason(_counts(superset_H=5, epipolar_kept=0), tiles)
+    assert "do not share one epipolar geometry" in reachable and "the 5 tile match sets" in reachable
+    unreachable = empty_result_reason(_counts(superset_H=4, epipolar_kept=0), tiles)
+    assert "cannot keep a match with only 4 tile match sets" in unreachable
+    assert "t_xi |H| = 3 x 4" in unreachable
+    assert "out of 12" in unreachable
+    # an earlier stage wins over a later one
+    first = empty_result_reason(_counts(block_planes=0, epipolar_kept=0), tiles)
+    assert "no block pair gave a plane" in first

@@ -4,10 +4,11 @@ import math
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from slime_match.errors import ConfigError
 from slime_match.geometry.homography import two_sided_error
-from slime_match.slime.expansion import PlaneConfig, expand_planes
+from slime_match.slime.expansion import Expansion, PlaneConfig, expand_planes
 
 from .helpers import make_table
 
@@ -15,6 +16,10 @@ from .helpers import make_table
 def _project(h, x):
     p = np.hstack([x, np.ones((len(x), 1))]) @ h.T
     return p[:, :2] / p[:, 2:]
+
+
+
+
 
 
 def _scene():
@@ -138,3 +143,18 @@ def test_expand_planes_equals_the_pair_by_pair_rule(mode):
         got = expand_planes(t, h, side, config, threads=threads)
         np.testing.assert_array_equal(got.toarray(), ref)
         assert got.has_canonical_format
+
+
+def test_expansion_counts_and_arrays():
+    """Sec. 3.4's result: the memberships' count, and each (plane, match) membership for ``--save-stages``."""
+    memberships = sp.csr_matrix(np.array([[1, 0, 1, 0], [0, 0, 0, 0], [0, 1, 1, 1]], bool))
+    expansion = Expansion(memberships)
+    assert expansion.counts == {"expanded_memberships": 5}
+    arrays = expansion.arrays()
+    assert sorted(arrays) == ["expanded_match", "expanded_plane"]
+    assert arrays["expanded_plane"].tolist() == [0, 0, 2, 2, 2]
+    assert arrays["expanded_match"].tolist() == [0, 2, 1, 2, 3]
+    assert arrays["expanded_plane"].dtype == np.int64 and arrays["expanded_match"].dtype == np.int64
+    nothing = Expansion(expand_planes(make_table(np.zeros((0, 2)), np.zeros((0, 2))), np.eye(3)[None], [1]))
+    assert nothing.memberships.shape == (1, 0) and nothing.counts == {"expanded_memberships": 0}
+    assert all(len(a) == 0 for a in nothing.arrays().values())

@@ -11,12 +11,18 @@ import torch
 from slime_match.geometry.ransac import HomographyRansacConfig
 from slime_match.slime.jobs import (
     device_workers,
+    features_from_numpy,
+    features_to_numpy,
+    joined,
     match_jobs,
+    pair_workers,
     piece_size,
     pieces_of,
     ransac_batches,
+    uses_cuda,
 )
 from slime_match.slime.pipeline import _workers
+from slime_match.types import Features
 
 
 def test_pieces_cover_the_set_at_multiples_of_the_batch():
@@ -76,3 +82,29 @@ def test_cuda_pipelines_keep_device_work_in_one_process():
     cuda, cpu = SimpleNamespace(device=torch.device("cuda")), SimpleNamespace(device=torch.device("cpu"))
     assert device_workers(cuda, 4) == 1 and device_workers(cpu, 4) == 4
     assert _workers(3) == 3 and _workers(0) == 1 and _workers(None) == max(1, os.cpu_count() or 1)
+
+
+def test_uses_cuda_and_pair_workers():
+    assert uses_cuda(SimpleNamespace(device=torch.device("cuda", 0)))
+    assert not uses_cuda(SimpleNamespace(device=torch.device("cpu"))) and not uses_cuda(SimpleNamespace())
+    assert not uses_cuda(SimpleNamespace(device=None))
+    # forking pays from four pairs a worker
+    assert pair_workers(8, 2) == 2 and pair_workers(7, 2) == 1
+    assert pair_workers(0, 1) == 1 and pair_workers(400, 16) == 16
+
+
+def test_features_cross_processes_as_numpy_pieces():
+    """Features sent from a worker as numpy arrays, in consecutive pieces, come back whole, bit for bit; a
+    features set without shape frames keeps None."""
+    g = torch.Generator().manual_seed(0)
+    laf, shape_laf = torch.rand(7, 2, 3, generator=g), torch.rand(7, 2, 3, generator=g)
+    features = Features(laf, torch.rand(7, 5, generator=g), torch.rand(7, generator=g), shape_laf)
+    pieces = [features_to_numpy(features.subset(torch.arange(a, b))) for a, b in ((0, 3), (3, 6), (6, 7))]
+    assert all(isinstance(a, np.ndarray) for piece in pieces for a in piece)
+    back = features_from_numpy(joined(pieces), torch.device("cpu"))
+    for name in ("laf", "descriptors", "response", "shape_laf"):
+        assert torch.equal(getattr(back, name), getattr(features, name)), name
+    bare = Features(laf, torch.zeros(7, 0), torch.ones(7), None)
+    arrays = joined([features_to_numpy(bare)] * 2)
+    assert arrays[3] is None and arrays[0].shape == (14, 2, 3) and arrays[1].shape == (14, 0)
+    assert features_from_numpy(arrays, torch.device("cpu")).shape_laf is None

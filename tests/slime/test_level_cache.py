@@ -8,8 +8,9 @@ from conftest import run_cli
 
 from slime_match import Matcher, load_image, make_config
 from slime_match.errors import ConfigError
+from slime_match.slime import level_cache
 from slime_match.slime.blocks import BlockConfig, make_blocks
-from slime_match.slime.level_cache import LevelCache, nbytes, request_key
+from slime_match.slime.level_cache import FeatureLevels, LevelCache, feature_levels, nbytes, request_key
 from slime_match.slime.levels import LevelRequest, ScaleLevel
 
 WEIGHT_FREE_SMALL = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift", "scales": (1,)}
@@ -97,3 +98,37 @@ def test_a_self_pair_counts_its_second_image_as_reused(pair):
     counts = [matcher(a, b).summary["counts"] for a, b in ((left, left), (left, right))]
     assert [(c["feature_sets"], c["cached_feature_sets"]) for c in counts] == [(4, 2), (4, 2)]
     assert (matcher.level_cache.misses, matcher.level_cache.hits) == (4, 2)
+
+
+def test_feature_levels_counts():
+    levels = [_levels(1), _levels(2), _levels(3)]
+    assert FeatureLevels(levels, 2).counts == {"feature_sets": 3, "cached_feature_sets": 2}
+    assert FeatureLevels([], 0).counts == {"feature_sets": 0, "cached_feature_sets": 0}
+
+
+def test_feature_levels_computes_each_distinct_request_once(monkeypatch):
+    """Requests the cache cannot answer are computed in one ``build_levels_many`` call, each distinct one once
+    (a repeat in the same pair counts as reused); without a cache all are computed."""
+    calls = []
+
+    def fake_build(pipeline, requests, workers):
+        calls.append([r.detection for r in requests])
+        return [_levels(10 + k) for k, _ in enumerate(requests)]
+
+    monkeypatch.setattr(level_cache, "build_levels_many", fake_build)
+    g = np.random.default_rng(0)
+    a, b = g.random((8, 8, 3), dtype=np.float32), g.random((8, 8, 3), dtype=np.float32)
+    requests = [LevelRequest(a, [], detection="merged"), LevelRequest(a.copy(), [], detection="merged"),
+                LevelRequest(a, [], detection="scale"), LevelRequest(b, [], detection="merged")]
+    cache = LevelCache(budget_bytes=10_000)
+    found = feature_levels(None, requests, 2, cache)
+    assert calls == [["merged", "scale", "merged"]]  # the copy of a is the same request
+    assert found.reused == 1 and found.counts == {"feature_sets": 4, "cached_feature_sets": 1}
+    assert found.levels[0] is found.levels[1] and found.levels[2] is not found.levels[0]
+    assert len(cache) == 3 and (cache.hits, cache.misses) == (0, 3)
+    again = feature_levels(None, requests[2:][::-1], 2, cache)  # all cached
+    assert calls == [["merged", "scale", "merged"]] and again.reused == 2
+    assert again.levels[0] is found.levels[3] and again.levels[1] is found.levels[2]
+    plain = feature_levels(None, requests, 2, None)
+    assert calls[-1] == ["merged", "merged", "scale", "merged"]
+    assert plain.reused == 0 and len(plain.levels) == 4

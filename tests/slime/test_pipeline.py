@@ -13,6 +13,8 @@ from slime_match.eval.metrics import correct_matches_homography, coverage, valid
 from slime_match.geometry.homography import project
 from slime_match.io import load_image
 from slime_match.matcher import Matcher
+from slime_match.slime.blocks import BlockConfig, make_blocks, make_tiles
+from slime_match.slime.pipeline import Layout
 
 from .helpers import WEIGHT_FREE
 
@@ -137,3 +139,35 @@ def test_per_block_slime_end_to_end_on_a_real_pair():
     ok = correct_matches_homography(result.keypoints0, result.keypoints1, h)
     assert ok.sum() > 100 and ok.mean() >= 0.9, (int(ok.sum()), ok.mean())
     assert result.summary["config"]["slime"]["detection"] == "block"
+
+
+def test_layout_of_an_image_pair():
+    """Sec. 3.1's layout: every scale's blocks and the full-resolution tiles of each image, as ``make_blocks``
+    and ``make_tiles`` give them."""
+    config = BlockConfig(scales=(1, 2))
+    layout = Layout.of((480, 640), (600, 800), config)
+    assert layout.blocks0 == make_blocks(480, 640, config)
+    assert layout.blocks1 == make_blocks(600, 800, config)
+    assert layout.tiles0 == make_tiles(480, 640, config)
+    assert layout.tiles1 == make_tiles(600, 800, config)
+    assert len(layout.blocks0) == 2 + 6 and len(layout.tiles0) == 12
+
+
+def test_layout_arrays_are_the_cores_in_original_pixels():
+    """``--save-stages``' blocks0/1 and tiles0/1: per block [x0, y0, x1, y1, scale index], its core's edges
+    (pixel borders, half a pixel off the centres) in original px."""
+    layout = Layout.of((480, 640), (600, 800), BlockConfig())
+    arrays = layout.arrays()
+    assert sorted(arrays) == ["blocks0", "blocks1", "tiles0", "tiles1"]
+    for name, blocks in (("blocks0", layout.blocks0), ("blocks1", layout.blocks1), ("tiles0", layout.tiles0),
+                         ("tiles1", layout.tiles1)):
+        expected = [[b.core[0] / b.fx - 0.5, b.core[1] / b.fy - 0.5, b.core[2] / b.fx - 0.5,
+                     b.core[3] / b.fy - 0.5, b.scale_index] for b in blocks]
+        np.testing.assert_allclose(arrays[name], expected, rtol=0, atol=1e-9)
+    # the tiles are at full resolution: their cores less half a pixel
+    np.testing.assert_array_equal(arrays["tiles0"][:2], [[-0.5, -0.5, 191.5, 191.5, 0],
+                                                         [148.5, -0.5, 340.5, 191.5, 0]])
+    assert arrays["tiles0"][:, 2].max() == 639.5 and arrays["tiles1"][:, 3].max() == 599.5
+    # scale 1: 192 px at 0.4x
+    np.testing.assert_array_equal(arrays["blocks0"][0], [-0.5, -0.5, 479.5, 479.5, 0])
+    assert set(arrays["blocks1"][:, 4].tolist()) == {0.0, 1.0, 2.0}
