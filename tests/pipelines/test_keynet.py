@@ -12,7 +12,7 @@ from slime_match.features.weights import is_cached
 from slime_match.io import load_image
 from slime_match.matcher import Matcher
 from slime_match.pipelines import BaseConfig, KeyNetPipeline
-from slime_match.slime import pipeline as slime_pipeline
+from slime_match.slime import refine as slime_refine
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +91,7 @@ def test_keynet_and_slimed_keynet_on_a_real_pair(graf_small, monkeypatch):
     assert ok_base.sum() > 50 and ok_base.mean() > 0.9, (int(ok_base.sum()), ok_base.mean())
 
     calls = []
-    monkeypatch.setattr(slime_pipeline, "global_dtm", lambda *args, **kw: calls.append(1))
+    monkeypatch.setattr(slime_refine, "global_dtm", lambda *args, **kw: calls.append(1))
     slime = Matcher(make_config("slime-keynet", descriptor="tfeat", device="cpu"))(a, b)
     assert not calls  # the paper's Slimed Key.Net has no final global filter
     ok = correct_matches_homography(slime.keypoints0, slime.keypoints1, h)

@@ -1,5 +1,5 @@
 """fork_map: results in order for any split, the binomial fork tree, errors and dead workers raised, no
-children left behind."""
+children left behind; torch_threads restores the caller's setting."""
 
 import math
 import os
@@ -9,7 +9,14 @@ import time
 import pytest
 import torch
 
-from slime_match.slime.forking import RemoteTraceback, WorkerDied, _subtree, _tree_children, fork_map
+from slime_match._runtime.forking import (
+    RemoteTraceback,
+    WorkerDied,
+    _subtree,
+    _tree_children,
+    fork_map,
+    torch_threads,
+)
 
 CALLER = os.getpid()
 
@@ -125,3 +132,10 @@ def test_results_that_cannot_be_pickled_are_a_clear_error():
 
     with pytest.raises(RuntimeError, match="could not be pickled"):
         fork_map(fn, 8, 2)
+
+
+def test_torch_threads_restores_setting():
+    before = torch.get_num_threads()
+    with torch_threads(1):
+        assert torch.get_num_threads() == 1
+    assert torch.get_num_threads() == before

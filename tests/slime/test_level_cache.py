@@ -1,14 +1,17 @@
 """The feature cache: Slime's block and tile features of an image reused by the next pairs, same matches."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from conftest import run_cli
 
 from slime_match import Matcher, load_image, make_config
 from slime_match.errors import ConfigError
-from slime_match.slime.block_matching import LevelRequest, ScaleLevel
+from slime_match.slime import level_cache
 from slime_match.slime.blocks import BlockConfig, make_blocks
-from slime_match.slime.level_cache import LevelCache, nbytes, request_key
+from slime_match.slime.level_cache import FeatureLevels, LevelCache, feature_levels, nbytes, request_key
+from slime_match.slime.levels import LevelRequest, ScaleLevel
 
 WEIGHT_FREE_SMALL = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift", "scales": (1,)}
 
@@ -25,13 +28,16 @@ def test_nbytes_counts_each_array_once():
     assert nbytes({"a": [shared, (shared,)], "b": 3}) == 100
 
 
-def test_get_put_eviction_and_fresh_fixed_caches():
+def test_get_put_eviction_and_the_same_immutable_levels():
     cache = LevelCache(budget_bytes=250)
     cache.put("a", _levels(100))
     cache.put("b", _levels(100))
     first = cache.get("a")  # "a" becomes the most recently used
-    first[0].fixed[3] = "filled by a pair"
-    assert cache.get("a")[0].fixed == {}  # each use starts with an empty fixed-orientation cache
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        first[0].members = ["changed by a pair"]
+    assert not hasattr(first[0], "fixed")  # no per-pair cache: FixedDescriptors holds a stage's descriptors
+    again = cache.get("a")
+    assert again is first and again[0] is first[0]  # each use gets the same levels back, unchanged
     cache.put("c", _levels(100))  # over budget: "b", the least recently used, goes
     assert cache.get("b") is None and cache.get("c") is not None and len(cache) == 2
     assert cache.size_bytes == 200 and (cache.hits, cache.misses) == (3, 1)
@@ -92,3 +98,37 @@ def test_a_self_pair_counts_its_second_image_as_reused(pair):
     counts = [matcher(a, b).summary["counts"] for a, b in ((left, left), (left, right))]
     assert [(c["feature_sets"], c["cached_feature_sets"]) for c in counts] == [(4, 2), (4, 2)]
     assert (matcher.level_cache.misses, matcher.level_cache.hits) == (4, 2)
+
+
+def test_feature_levels_counts():
+    levels = [_levels(1), _levels(2), _levels(3)]
+    assert FeatureLevels(levels, 2).counts == {"feature_sets": 3, "cached_feature_sets": 2}
+    assert FeatureLevels([], 0).counts == {"feature_sets": 0, "cached_feature_sets": 0}
+
+
+def test_feature_levels_computes_each_distinct_request_once(monkeypatch):
+    """Requests the cache cannot answer are computed in one ``build_levels_many`` call, each distinct one once
+    (a repeat in the same pair counts as reused); without a cache all are computed."""
+    calls = []
+
+    def fake_build(pipeline, requests, workers):
+        calls.append([r.detection for r in requests])
+        return [_levels(10 + k) for k, _ in enumerate(requests)]
+
+    monkeypatch.setattr(level_cache, "build_levels_many", fake_build)
+    g = np.random.default_rng(0)
+    a, b = g.random((8, 8, 3), dtype=np.float32), g.random((8, 8, 3), dtype=np.float32)
+    requests = [LevelRequest(a, [], detection="merged"), LevelRequest(a.copy(), [], detection="merged"),
+                LevelRequest(a, [], detection="scale"), LevelRequest(b, [], detection="merged")]
+    cache = LevelCache(budget_bytes=10_000)
+    found = feature_levels(None, requests, 2, cache)
+    assert calls == [["merged", "scale", "merged"]]  # the copy of a is the same request
+    assert found.reused == 1 and found.counts == {"feature_sets": 4, "cached_feature_sets": 1}
+    assert found.levels[0] is found.levels[1] and found.levels[2] is not found.levels[0]
+    assert len(cache) == 3 and (cache.hits, cache.misses) == (0, 3)
+    again = feature_levels(None, requests[2:][::-1], 2, cache)  # all cached
+    assert calls == [["merged", "scale", "merged"]] and again.reused == 2
+    assert again.levels[0] is found.levels[3] and again.levels[1] is found.levels[2]
+    plain = feature_levels(None, requests, 2, None)
+    assert calls[-1] == ["merged", "merged", "scale", "merged"]
+    assert plain.reused == 0 and len(plain.levels) == 4

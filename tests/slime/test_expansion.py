@@ -1,25 +1,16 @@
-"""Match table, relative orientation, plane expansion on synthetic planes with exact answers."""
+"""Plane expansion and match pruning (Sec. 3.4) on synthetic planes with exact answers."""
 
 import math
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from slime_match.errors import ConfigError
 from slime_match.geometry.homography import two_sided_error
-from slime_match.slime.planes import (
-    MatchTable,
-    PlaneConfig,
-    deduplicate,
-    expand_planes,
-    relative_orientation,
-    wrap_angle,
-)
+from slime_match.slime.expansion import Expansion, PlaneConfig, expand_planes
 
-
-def _table(xy0, xy1, angle0, angle1, scale0, scale1):
-    m = len(xy0)
-    return MatchTable(xy0, xy1, angle0, angle1, scale0, scale1, np.ones(m), np.zeros(m), np.zeros(m))
+from .helpers import make_table
 
 
 def _project(h, x):
@@ -27,32 +18,8 @@ def _project(h, x):
     return p[:, :2] / p[:, 2:]
 
 
-def test_relative_orientation_histogram():
-    rng = np.random.default_rng(0)
-    a0 = rng.uniform(-np.pi, np.pi, 200)
-    rho = np.concatenate([np.full(120, math.radians(92.0)), rng.uniform(-np.pi, np.pi, 80)])
-    assert relative_orientation(a0, a0 + rho) == pytest.approx(math.pi / 2)
-    # cyclic: values around +-180 deg fall in the same bin
-    r = relative_orientation(np.zeros(4), np.array([3.1, -3.1, 3.12, 0.5]))
-    assert abs(wrap_angle(r - math.pi)) < 1e-12
-    # upright pairs: 0 is a bin centre
-    assert relative_orientation(np.zeros(5), np.full(5, 0.1)) == 0.0
-    # weights decide
-    assert relative_orientation(np.zeros(3), np.array([0.0, 1.0, 1.0]), weights=np.array([5, 1, 1])) == 0.0
-    assert math.isnan(relative_orientation(np.zeros(0), np.zeros(0)))
 
 
-def test_deduplicate_merges_exact_duplicates():
-    xy0 = np.array([[1.0, 2.0], [1.0, 2.0], [5.0, 5.0], [1.0, 2.0 + 1e-9]])
-    xy1 = np.array([[3.0, 4.0], [3.0, 4.0], [6.0, 6.0], [3.0, 4.0]])
-    t = _table(xy0, xy1, np.zeros(4), np.zeros(4), np.ones(4), np.ones(4))
-    t.score = np.array([0.5, 0.2, 0.3, 0.9])
-    d, inv = deduplicate(t)
-    assert len(d) == 2
-    assert inv[0] == inv[1] == inv[3] != inv[2]
-    assert d.weight[inv[0]] == 3 and d.weight[inv[2]] == 1
-    assert d.score[inv[0]] == pytest.approx(0.2)
-    np.testing.assert_allclose(d.xy0[inv], t.xy0, atol=1e-6)
 
 
 def _scene():
@@ -77,7 +44,7 @@ def _scene():
     psi = np.where(kind == 2, psi * 5.0, psi)
     # outliers: random positions
     xo0, xo1 = rng.uniform(0, 400, (30, 2)), rng.uniform(0, 700, (30, 2))
-    t = _table(
+    t = make_table(
         np.vstack([x0, xo0]),
         np.vstack([x1, xo1]),
         np.concatenate([a0, np.zeros(30)]),
@@ -114,7 +81,7 @@ def test_expand_planes_plane_side_and_literal_scale_mode():
     # a zoom of 4 violates t_sigma = 3 in "homography" mode whatever the patches say
     z = np.diag([4.0, 4.0, 1.0])
     xy0 = np.array([[10.0, 10.0], [20.0, 30.0]])
-    tz = _table(xy0, 4 * xy0 + 1.5, np.zeros(2), np.zeros(2), np.ones(2), np.full(2, 4.0))
+    tz = make_table(xy0, 4 * xy0 + 1.5, np.zeros(2), np.zeros(2), np.ones(2), np.full(2, 4.0))
     assert expand_planes(tz, z[None], [1], PlaneConfig(relative_scale="homography")).nnz == 0
     assert expand_planes(tz, z[None], [1]).nnz == 2
     with pytest.raises(ConfigError):
@@ -167,7 +134,7 @@ def test_expand_planes_equals_the_pair_by_pair_rule(mode):
     y = np.c_[xy0, np.ones(m)] @ base.T
     xy1 = y[:, :2] / y[:, 2:] + g.normal(0, 8, (m, 2))
     angle0 = g.uniform(-np.pi, np.pi, m)
-    t = _table(xy0, xy1, angle0, angle0 + g.normal(0, 1.0, m), np.ones(m), np.exp(g.normal(0, 1.0, m)))
+    t = make_table(xy0, xy1, angle0, angle0 + g.normal(0, 1.0, m), np.ones(m), np.exp(g.normal(0, 1.0, m)))
     side = np.array([1, 1, 1, -1, 1, 1, 1, 1.0])
     config = PlaneConfig(relative_scale=mode)
     ref = _expand_reference(t, h, side, config)
@@ -176,3 +143,18 @@ def test_expand_planes_equals_the_pair_by_pair_rule(mode):
         got = expand_planes(t, h, side, config, threads=threads)
         np.testing.assert_array_equal(got.toarray(), ref)
         assert got.has_canonical_format
+
+
+def test_expansion_counts_and_arrays():
+    """Sec. 3.4's result: the memberships' count, and each (plane, match) membership for ``--save-stages``."""
+    memberships = sp.csr_matrix(np.array([[1, 0, 1, 0], [0, 0, 0, 0], [0, 1, 1, 1]], bool))
+    expansion = Expansion(memberships)
+    assert expansion.counts == {"expanded_memberships": 5}
+    arrays = expansion.arrays()
+    assert sorted(arrays) == ["expanded_match", "expanded_plane"]
+    assert arrays["expanded_plane"].tolist() == [0, 0, 2, 2, 2]
+    assert arrays["expanded_match"].tolist() == [0, 2, 1, 2, 3]
+    assert arrays["expanded_plane"].dtype == np.int64 and arrays["expanded_match"].dtype == np.int64
+    nothing = Expansion(expand_planes(make_table(np.zeros((0, 2)), np.zeros((0, 2))), np.eye(3)[None], [1]))
+    assert nothing.memberships.shape == (1, 0) and nothing.counts == {"expanded_memberships": 0}
+    assert all(len(a) == 0 for a in nothing.arrays().values())

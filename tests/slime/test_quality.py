@@ -1,7 +1,7 @@
 """Slime vs its base Hz+ on the planar GT pairs and on exact rotations (the issue's quality bars).
 
 These run Slime on 15 + 9 real pairs (tens of seconds each on a 2-core CPU): marked slow, run them with
-``python -m pytest -m slow tests/test_slime_quality.py``.
+``python -m pytest -m slow tests/slime/test_quality.py``.
 """
 
 import numpy as np

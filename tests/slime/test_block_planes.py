@@ -1,0 +1,109 @@
+"""Block planes (Secs. 3.2-3.3): block pairs matched and re-matched under fixed orientations, the planes
+mapped exactly to original pixels and gathered in one match table."""
+
+import dataclasses
+
+import cv2
+import numpy as np
+import torch
+
+from slime_match.geometry.homography import homography_dlt, project
+from slime_match.geometry.ransac import HomographyRansacConfig
+from slime_match.pipelines import BaseConfig, make_base_pipeline
+from slime_match.slime.block_planes import (
+    BlockPairMatches,
+    block_planes,
+    block_planes_to_original,
+    match_block_pairs,
+)
+from slime_match.slime.blocks import make_blocks
+from slime_match.slime.levels import build_levels
+from slime_match.slime.match_table import deduplicate
+
+from .helpers import SIZE, WEIGHT_FREE, squares
+
+
+def test_block_planes_map_exactly_to_original_frame():
+    blocks0, blocks1 = make_blocks(480, 640), make_blocks(600, 800)
+    w0 = next(i for i, b in enumerate(blocks0) if b.scale_index == 2)
+    w1 = next(i for i, b in enumerate(blocks1) if b.scale_index == 0)
+    h_true = np.array([[0.9, 0.1, 20.0], [-0.05, 1.1, -10.0], [1e-4, 2e-5, 1.0]])
+    rng = np.random.default_rng(0)
+    x_orig = rng.uniform(50, 400, (30, 2))
+    y_orig, _ = project(h_true, x_orig)
+    b0, b1 = blocks0[w0], blocks1[w1]
+    x_s, y_s = b0.to_scaled(x_orig), b1.to_scaled(y_orig)
+    # The block-frame homography that RANSAC would estimate: scaled 0 -> scaled 1.
+    h_scaled, _ = homography_dlt(x_s, y_s)
+    bpm = BlockPairMatches(np.array([[w0, w1]]), h_scaled[None], np.array([0.3]), np.zeros(30, np.int64), x_s, y_s,
+                           np.full(30, 2.0 * b0.factor), np.full(30, 3.0 * b1.factor), np.arange(30.0))
+    table, h, side = block_planes_to_original(bpm, blocks0, blocks1)
+    assert np.allclose(table.xy0, x_orig, atol=1e-6) and np.allclose(table.xy1, y_orig, atol=1e-6)
+    mapped, _ = project(h[0], x_orig)
+    assert np.allclose(mapped, y_orig, atol=1e-5)
+    assert side.tolist() == [1.0]
+    assert np.allclose(table.angle1, 0.3) and np.allclose(table.angle0, 0.0)
+    assert np.allclose(table.scale0, 2.0, rtol=1e-2) and np.allclose(table.scale1, 3.0, rtol=1e-2)
+
+
+def _moved_squares():
+    image, _ = squares()
+    moved = cv2.warpAffine(image, np.float32([[1, 0, 6], [0, 1, 4]]), SIZE[::-1], borderMode=cv2.BORDER_REFLECT)
+    return image, moved
+
+
+def test_upright_base_reuses_the_first_run_for_the_orientation_refined_one(monkeypatch):
+    """On an upright base, the fixed frames and descriptors at angle 0 are the features' own, bit for bit, so
+    Sec. 3.3's re-run of a theta* = 0 pair repeats the first run: its matches are reused (no descriptors, no
+    re-match), and the planes equal those of the re-run done in full."""
+    image, moved = _moved_squares()
+    upright = make_base_pipeline(BaseConfig(**{**WEIGHT_FREE, "orientation": "upright"}))
+    assert upright.own_frames_upright() and not make_base_pipeline(BaseConfig(**WEIGHT_FREE)).own_frames_upright()
+    context = upright.prepare(image)
+    own = upright.detect(context)
+    fixed = upright.describe_fixed(context, own.subset(torch.arange(3, len(own))), 0.0)
+    assert torch.equal(fixed.laf, own.laf[3:]) and torch.equal(fixed.descriptors, own.descriptors[3:])
+
+    blocks = [b for b in make_blocks(*SIZE) if b.scale_index == 0]
+
+    def planes():
+        levels0, levels1 = build_levels(upright, image, blocks), build_levels(upright, moved, blocks)
+        return match_block_pairs(upright, levels0, levels1, blocks, blocks, HomographyRansacConfig(threshold=15.0))
+
+    reused, counts = planes()
+    monkeypatch.setattr(upright, "own_frames_upright", lambda: False)
+    full, full_counts = planes()
+    assert counts["block_planes"] > 0 and counts["block_pairs_rerun"] == 0
+    assert full_counts["block_pairs_rerun"] == full_counts["block_planes_first"] == counts["block_planes_first"]
+    for field in dataclasses.fields(full):
+        np.testing.assert_array_equal(getattr(reused, field.name), getattr(full, field.name))
+
+
+def test_block_planes_gathers_the_refined_planes_in_original_pixels(levels):
+    """``block_planes`` is ``match_block_pairs``, ``block_planes_to_original`` and ``deduplicate`` in a row:
+    the same planes, raw and deduplicated tables, their counts, and their ``--save-stages`` arrays."""
+    pipeline, blocks, _, _, _ = levels
+    image, moved = _moved_squares()
+    levels0, levels1 = build_levels(pipeline, image, blocks), build_levels(pipeline, moved, blocks)
+    ransac = HomographyRansacConfig(threshold=15.0)
+    planes = block_planes(pipeline, levels0, levels1, blocks, blocks, ransac)
+    matches, counts = match_block_pairs(pipeline, levels0, levels1, blocks, blocks, ransac)
+    raw, h, side = block_planes_to_original(matches, blocks, blocks)
+    table, _ = deduplicate(raw)
+    assert counts["block_planes"] > 0 and len(raw) > len(table) > 0  # overlapping blocks: duplicate matches
+    for field in dataclasses.fields(matches):
+        np.testing.assert_array_equal(getattr(planes.level_matches, field.name), getattr(matches, field.name))
+    for field in dataclasses.fields(raw):
+        np.testing.assert_array_equal(getattr(planes.raw, field.name), getattr(raw, field.name))
+        np.testing.assert_array_equal(getattr(planes.table, field.name), getattr(table, field.name))
+    np.testing.assert_array_equal(planes.H, h)
+    np.testing.assert_array_equal(planes.side, side)
+    assert planes.counts == {**counts, "block_matches": len(raw), "block_matches_unique": len(table)}
+    arrays = planes.arrays()
+    assert set(arrays) == {"planes_pairs", "planes_H", "planes_theta", "block_matches_xy0",
+                           "block_matches_xy1", "block_matches_plane", "table_xy0", "table_xy1",
+                           "table_weight"}
+    np.testing.assert_array_equal(arrays["planes_pairs"], matches.pairs)
+    np.testing.assert_array_equal(arrays["block_matches_plane"], raw.source)
+    np.testing.assert_array_equal(arrays["table_weight"], table.weight)
+    assert arrays["table_weight"].sum() == len(raw)
