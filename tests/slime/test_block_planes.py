@@ -32,7 +32,7 @@ def test_block_planes_map_exactly_to_original_frame():
     x_orig = rng.uniform(50, 400, (30, 2))
     y_orig, _ = project(h_true, x_orig)
     b0, b1 = blocks0[w0], blocks1[w1]
-    x_s, y_s = b0.to_scaled(x_orig), b1.to_scaled(y_orig)
+    x_s, y_s = b0.level_frame.from_original(x_orig), b1.level_frame.from_original(y_orig)
     # The block-frame homography that RANSAC would estimate: scaled 0 -> scaled 1.
     h_scaled, _ = homography_dlt(x_s, y_s)
     bpm = BlockPairMatches(np.array([[w0, w1]]), h_scaled[None], np.array([0.3]), np.zeros(30, np.int64), x_s, y_s,

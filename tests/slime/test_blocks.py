@@ -58,10 +58,10 @@ def test_coordinate_maps_roundtrip_and_crop():
     rng = np.random.default_rng(0)
     xy = rng.uniform(0, 480, (50, 2))
     for b in blocks:
-        np.testing.assert_allclose(b.local_to_original(b.original_to_local(xy)), xy, atol=1e-9)
+        np.testing.assert_allclose(b.frame.to_original(b.frame.from_original(xy)), xy, atol=1e-9)
     b = blocks[1]  # scale 1 (factor 0.4), second column
     # pixel-centre alignment of the resize: original pixel centre 0 maps to -0.3 at factor 0.4
-    np.testing.assert_allclose(b.to_scaled(np.array([[0.0, 0.0]])), [[-0.3, -0.3]])
+    np.testing.assert_allclose(b.level_frame.from_original(np.array([[0.0, 0.0]])), [[-0.3, -0.3]])
     img = rng.random((192, 256)).astype(np.float32)
     crop = b.crop(img)
     assert crop.shape == b.shape
@@ -86,7 +86,7 @@ def test_points_in_blocks_membership():
     pts = np.random.default_rng(1).uniform([0, 0], [640, 480], (2000, 2))
     mem = points_in_blocks(pts, blocks).toarray()
     for i, b in enumerate(blocks):
-        np.testing.assert_array_equal(mem[i], b.in_core_local(b.original_to_local(pts)))
+        np.testing.assert_array_equal(mem[i], b.in_core_local(b.frame.from_original(pts)))
     for k in range(3):  # each scale covers the whole image
         rows = [i for i, b in enumerate(blocks) if b.scale_index == k]
         assert mem[rows].any(axis=0).all()

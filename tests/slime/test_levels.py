@@ -11,9 +11,10 @@ import torch
 from slime_match._runtime.forking import torch_threads
 from slime_match.config import make_config
 from slime_match.errors import ConfigError
+from slime_match.features.image_ops import resize_lanczos
 from slime_match.io import load_image
 from slime_match.pipelines import BaseConfig, make_base_pipeline
-from slime_match.slime.blocks import make_blocks, make_tiles, points_in_blocks, resize_lanczos
+from slime_match.slime.blocks import make_blocks, make_tiles, points_in_blocks
 from slime_match.slime.fixed_descriptors import FixedDescriptors
 from slime_match.slime.jobs import piece_size
 from slime_match.slime.levels import (
@@ -36,13 +37,13 @@ def test_per_block_levels_one_per_block_with_core_keypoints(levels):
     for lv, block in zip(per_block, blocks):
         assert lv.origin == (float(block.box[0]), float(block.box[1]))
         assert np.array_equal(lv.members[0], np.arange(len(lv.features)))
-        inside = points_in_blocks(block.to_original(lv.features.xy.numpy()), [block]).toarray()[0]
+        inside = points_in_blocks(block.level_frame.to_original(lv.features.xy.numpy()), [block]).toarray()[0]
         assert len(lv.features) > 20 and inside.all()
 
 
 def test_square_corners_found_at_the_same_scaled_positions_by_both_modes(levels):
     _, blocks, corners, shared, per_block = levels
-    scaled = blocks[0].to_scaled(corners)
+    scaled = blocks[0].level_frame.from_original(corners)
     d_shared, i_shared = nearest(scaled, shared[0].features.xy.numpy())
     xy_block = np.concatenate([lv.features.xy.numpy() for lv in per_block])
     d_block, i_block = nearest(scaled, xy_block)
