@@ -13,6 +13,6 @@ def test_import_contracts_are_kept():
     lint = shutil.which("lint-imports")
     if lint is None:
         pytest.fail("lint-imports is missing: install the test extra (pip install -e '.[test]')")
-    run = subprocess.run([lint, "--no-cache"], cwd=ROOT, capture_output=True, text=True)
+    run = subprocess.run([lint, "--no-cache"], check=False, cwd=ROOT, capture_output=True, text=True)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-2000:]
     assert "0 broken" in run.stdout
