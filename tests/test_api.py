@@ -79,8 +79,8 @@ def test_make_config_refuses_options_the_method_would_ignore(preset, options, me
 
 
 @pytest.mark.parametrize(("options", "message"), [
-    ({"seed": -1}, "seed must be a non-negative integer, got -1"),
-    ({"seed": 1.5}, "seed must be a non-negative integer, got 1.5"),
+    ({"seed": -1}, "seed must be an integer of at least 0, got -1"),
+    ({"seed": 1.5}, "seed must be an integer of at least 0, got 1.5"),
     ({"scales": (1, 2, 1)}, "scales must be distinct"),
 ])
 def test_make_config_refuses_bad_values(options, message):

@@ -86,6 +86,39 @@ def test_slime_tile_test_option(pair, tmp_path, capsys):
     assert code == 2 and "'tile_test' is a Slime option" in err and not (tmp_path / "r").exists()
 
 
+def test_set_any_option_and_rerun_a_recorded_configuration(pair, tmp_path, capsys):
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "a", *WEIGHT_FREE, "--set", "slime.tiles.t_xi=12",
+                           "--set", "slime.blocks.scales=1,2", "--no-plot")
+    assert code == 0, err
+    first = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert first["config"]["slime"]["tiles"]["t_xi"] == 12 and first["config"]["slime"]["blocks"]["scales"] == [1, 2]
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "b", "--config", tmp_path / "a" / "summary.json",
+                           "--no-plot")
+    assert code == 0, err
+    assert json.loads((tmp_path / "b" / "summary.json").read_text())["config"] == first["config"]
+    a, b = np.load(tmp_path / "a" / "matches.npz"), np.load(tmp_path / "b" / "matches.npz")
+    np.testing.assert_array_equal(a["keypoints0"], b["keypoints0"])
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "c", "--config", tmp_path / "a" / "summary.json",
+                           "--method", "rootsift", "--set", "slime.tiles.t_xi=9")
+    assert code == 2 and "'slime.tiles.t_xi' is a Slime option" in err and not (tmp_path / "c").exists()
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    (["--set", "slime.tiles.nope=1"], "unknown option 'slime.tiles.nope'"),
+    (["--set", "slime.tiles.t_xi=many"], "cannot read 'many' as float"),
+    (["--config", "missing.json"], "cannot read a configuration from missing.json"),
+])
+def test_bad_settings_and_configs_are_one_line_errors(pair, tmp_path, capsys, options, message):
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "out", *options)
+    assert code == 2 and message in err and not (tmp_path / "out").exists()
+
+
+def test_a_setting_without_a_value_is_a_usage_error(pair, tmp_path, capsys):
+    with pytest.raises(SystemExit) as stop:
+        run_cli(capsys, "match", *pair, "-o", tmp_path / "out", "--set", "t_xi")
+    assert stop.value.code == 2 and "expected OPTION=VALUE" in capsys.readouterr().err
+
+
 def test_blank_image_gives_explicit_empty_result(pair, tmp_path, capsys, caplog):
     blank = tmp_path / "blank.png"
     cv2.imwrite(str(blank), np.full((200, 300, 3), 128, np.uint8))

@@ -16,25 +16,32 @@ logger = logging.getLogger("slime_match")
 
 
 def _add_match_options(parser: argparse.ArgumentParser) -> None:
-    from .config import DETECTIONS, RANSAC_CHOICES, TILE_TESTS
+    from .config import DEVICES, methods
+    from .features.descriptors import DESCRIPTOR_CHOICES
+    from .features.orientation import ORIENTATION_CHOICES
+    from .features.shape import SHAPE_METHODS
+    from .geometry.backends import RANSAC_CHOICES
+    from .pipelines import base_names
+    from .slime.levels import DETECTIONS
+    from .slime.refine import TILE_TESTS
 
-    parser.add_argument("--method", default="slime", choices=["slime", "hz+", "rootsift", "keynet"],
+    parser.add_argument("--method", default=None, choices=methods(),
                         help="Slime (default) or a base pipeline alone")
-    parser.add_argument("--base", default=None, choices=["hz+", "rootsift", "keynet"],
+    parser.add_argument("--base", default=None, choices=base_names(),
                         help="base pipeline run inside Slime (default hz+)")
-    parser.add_argument("--descriptor", default=None, choices=["auto", "hardnet", "tfeat", "rootsift"],
+    parser.add_argument("--descriptor", default=None, choices=DESCRIPTOR_CHOICES,
                         help="Hz+ / Key.Net descriptor; auto = HardNet when its weights are available, else "
                              "RootSIFT (Key.Net: TFeat)")
-    parser.add_argument("--shape", default=None, choices=["affnet", "baumberg"], help="Hz+ affine shape")
-    parser.add_argument("--orientation", default=None, choices=["orinet", "gradient", "upright"],
+    parser.add_argument("--shape", default=None, choices=SHAPE_METHODS, help="Hz+ affine shape")
+    parser.add_argument("--orientation", default=None, choices=ORIENTATION_CHOICES,
                         help="Hz+ patch orientation")
     parser.add_argument("--upright", action="store_true", default=None,
                         help="no orientation estimation (the paper's upright variants)")
-    parser.add_argument("--ransac", default="none", choices=RANSAC_CHOICES, help="post-processing RANSAC")
+    parser.add_argument("--ransac", default=None, choices=RANSAC_CHOICES, help="post-processing RANSAC (default none)")
     parser.add_argument("--threshold", type=float, default=None,
                         help="inlier threshold in px of the --ransac post-processing (default 3)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (RANSAC sampling)")
-    parser.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"])
+    parser.add_argument("--seed", type=int, default=None, help="random seed (RANSAC sampling; default 0)")
+    parser.add_argument("--device", default=None, choices=DEVICES, help="default auto: CUDA when available")
     parser.add_argument("--weights-dir", default=None, help="folder with model weights (else TORCH_HOME cache)")
     parser.add_argument("-v", "--verbose", action="store_true",
                         help="log each stage as it finishes (seconds) and Slime's block and tile layout")
@@ -56,6 +63,13 @@ def _add_match_options(parser: argparse.ArgumentParser) -> None:
                         help="Slime: which full-resolution tile matches to keep: 'flow' (the paper's default: "
                              "near a match of the selected planes), 'plane' (fits the plane's homography over "
                              "the whole tile pair: more coverage, docs/coverage.md)")
+    parser.add_argument("--set", dest="settings", action="append", default=[], type=parse_setting,
+                        metavar="OPTION=VALUE",
+                        help="any option by its dotted path, e.g. slime.tiles.t_xi=12 or base.blob.shortlist_k=5 "
+                             "(repeatable; every path is in a run's summary.json, under config)")
+    parser.add_argument("--config", default=None, metavar="SUMMARY.json",
+                        help="start from the configuration a run recorded (its summary.json) instead of the "
+                             "method's preset; the options given here change it")
 
 
 def _add_workers_option(parser: argparse.ArgumentParser) -> None:
@@ -86,20 +100,28 @@ def parse_scales(text: str) -> tuple[int, ...]:
     return scales
 
 
+def parse_setting(text: str) -> tuple[str, str]:
+    """``OPTION=VALUE`` of ``--set`` (an argparse type: text without '=' raises ArgumentTypeError)."""
+    path, sep, value = text.partition("=")
+    if not sep or not path.strip():
+        raise argparse.ArgumentTypeError(f"expected OPTION=VALUE (e.g. slime.tiles.t_xi=12), got {text!r}")
+    return path.strip(), value.strip()
+
+
 def _options(args: argparse.Namespace) -> dict:
-    keys = ("base", "descriptor", "shape", "orientation", "upright", "ransac", "threshold", "seed", "device",
+    keys = ("method", "base", "descriptor", "shape", "orientation", "upright", "ransac", "threshold", "seed", "device",
             "weights_dir", "magnification", "scales", "detection", "tile_test", "max_side")
     return {key: getattr(args, key) for key in keys} | {"workers": getattr(args, "slime_workers", None)}
 
 
 def _config(args: argparse.Namespace):
-    from .config import make_config
+    from .config import MatchConfig, make_config, with_options
 
-    preset = args.method
-    options = _options(args)
-    if args.method == "slime" and options["base"] == "rootsift":
-        preset, options["base"] = "slime-rootsift", None
-    config = make_config(preset, **options)
+    options = _options(args) | dict(args.settings)
+    if args.config:
+        config = with_options(MatchConfig.load(args.config), **options)
+    else:
+        config = make_config(options.pop("method") or "slime", **options)
     if getattr(args, "save_stages", False):
         if config.method != "slime":
             raise ConfigError(f"--save-stages writes Slime's stages, but --method {config.method} runs the "

@@ -1,23 +1,36 @@
-"""Matcher configuration: one dataclass tree, named presets, and flat keyword overrides."""
+"""Matcher configuration: one dataclass tree, named presets, and overrides by flat or dotted option name.
+
+Every option lives once, in the dataclass of the code that reads it (``MatchConfig`` here, ``BaseConfig`` of the
+base pipelines, ``SlimeConfig`` and its stages' configs), with its default and its choices; each checks its
+values in ``__post_init__``. Any option is reachable by its dotted path (``slime.tiles.t_xi``); the top-level
+fields of the three main dataclasses also by their flat name (``descriptor``, ``workers``), and two nested
+ones by a short name (:data:`SHORT_NAMES`).
+"""
 
 from __future__ import annotations
 
 import copy
 import dataclasses
+import json
 import numbers
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError
+from .geometry.backends import RANSAC_CHOICES
 from .io import MIN_IMAGE_SIDE
-from .pipelines import BASE_NAMES, PIPELINES, BaseConfig, base_names, unimplemented
-from .slime.levels import DETECTIONS
+from .options import check_choice, check_integer, config_from_dict, set_option
+from .pipelines import PIPELINES, BaseConfig, base_names, unimplemented
 from .slime.pipeline import SlimeConfig
-from .slime.refine import TILE_TESTS
 
-METHODS = ("slime", "hz+", "rootsift", "keynet")
-RANSAC_CHOICES = ("none", "homography", "fundamental", "magsac-homography", "magsac-fundamental",
-                  "poselib-homography", "poselib-fundamental")
+DEVICES = ("auto", "cpu", "cuda")
+SHORT_NAMES = {"scales": "slime.blocks.scales", "same_homography": "slime.tiles.same_homography"}
+
+
+def methods() -> tuple[str, ...]:
+    """What ``MatchConfig.method`` may be: Slime, or a registered base pipeline alone."""
+    return ("slime", *base_names())
 
 
 @dataclass
@@ -25,12 +38,13 @@ class MatchConfig:
     """Everything that defines a matching run.
 
     Attributes:
-        method: "slime" (Slime on top of ``base``), or a base pipeline alone: "hz+" / "rootsift" / "keynet".
+        method: "slime" (Slime on top of ``base``), or a base pipeline alone: "hz+" / "rootsift" / "keynet" (or
+            one added with ``slime_match.pipelines.register_pipeline``).
         base: the base pipeline options (for Slime: the pipeline run on blocks and tiles; ``base.name`` may
             name a pipeline added with ``slime_match.pipelines.register_pipeline``).
         slime: Slime's parameters (the paper's defaults).
         ransac: post-processing robust estimation: "none", "homography" / "fundamental" (the paper's
-            RANSACs), "magsac-*" (OpenCV MAGSAC++) or "poselib-*".
+            RANSACs), "magsac-*" (OpenCV MAGSAC++) or "poselib-*" (``RANSAC_CHOICES``).
         threshold: post-processing RANSAC inlier threshold in px (the paper tests 5, 3, 2, 1).
         seed: seed of every random choice (RANSAC sampling), for reproducible runs.
         device: "auto" (CUDA when available), "cpu" or "cuda".
@@ -47,38 +61,56 @@ class MatchConfig:
     device: str = "auto"
     max_side: int | None = None
 
+    def __post_init__(self) -> None:
+        self._check_fields()
+
+    def _check_fields(self) -> None:
+        check_choice("method", self.method, methods())
+        check_choice("ransac", self.ransac, RANSAC_CHOICES)
+        check_choice("device", self.device, DEVICES)
+        check_integer("max_side", self.max_side, MIN_IMAGE_SIDE, optional=True)
+        if not (isinstance(self.threshold, numbers.Real) and self.threshold > 0):
+            raise ConfigError(f"threshold must be > 0 px, got {self.threshold!r}")
+        check_integer("seed", self.seed, 0)
+
     def validate(self) -> MatchConfig:
-        _choice("method", self.method, METHODS)
-        _choice("base", self.base.name, base_names())
+        """Check every field again (they may have been set after construction) and what ties them together:
+        the base pipeline is registered and can run inside Slime, "merged" detection has a base that
+        detects apart from describing."""
+        self._check_fields()
+        self.base.validate()
+        self.slime.validate()
+        check_choice("base", self.base.name, base_names())
+        if self.method != "slime" and self.base.name != self.method:
+            raise ConfigError(f"method {self.method!r} runs the {self.method} pipeline alone, but base.name is "
+                              f"{self.base.name!r}")
         if self.method == "slime" and (missing := unimplemented(PIPELINES[self.base.name], slime=True)):
             raise ConfigError(f"Slime cannot run on the {self.base.name} base pipeline: it does not implement "
                               f"{'; '.join(missing)}")
-        _choice("ransac", self.ransac, RANSAC_CHOICES)
-        _choice("descriptor", self.base.descriptor, ("auto", "hardnet", "tfeat", "rootsift"))
-        _choice("shape", self.base.shape, ("affnet", "baumberg"))
-        _choice("orientation", self.base.orientation, ("orinet", "gradient", "upright"))
-        _choice("device", self.device, ("auto", "cpu", "cuda"))
-        if self.max_side is not None and not (isinstance(self.max_side, numbers.Integral) and self.max_side >= MIN_IMAGE_SIDE):
-            raise ConfigError(f"max_side must be an integer of at least {MIN_IMAGE_SIDE} px, got {self.max_side!r}")
-        if not self.threshold > 0:
-            raise ConfigError(f"threshold must be > 0 px, got {self.threshold}")
-        if not (isinstance(self.seed, numbers.Integral) and self.seed >= 0):
-            raise ConfigError(f"seed must be a non-negative integer, got {self.seed!r}")
-        workers = self.slime.workers
-        if workers is not None and not (isinstance(workers, numbers.Integral) and workers >= 1):
-            raise ConfigError(f"workers must be an integer of at least 1 (None: one per available CPU), got {workers!r}")
         for name in ("detection", "tile_detection"):
-            value = getattr(self.slime, name)
-            if value is not None or name == "tile_detection":
-                _choice(name, value, DETECTIONS)
-            if value == "merged" and PIPELINES[self.base.name].slime_detection != "merged":
+            if getattr(self.slime, name) == "merged" and PIPELINES[self.base.name].slime_detection != "merged":
                 raise ConfigError(f"{name} 'merged' needs the hz+ base (a detector apart from the descriptor); "
                                   f"the {self.base.name} base takes 'scale' or 'block'")
-        _choice("tile_test", self.slime.tile_test, TILE_TESTS)
         return self
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> MatchConfig:
+        """The configuration of ``to_dict`` (or of a result's ``summary.json``: its ``config``), validated."""
+        if not isinstance(data, dict):
+            raise ConfigError(f"a configuration is a JSON object, got {type(data).__name__}")
+        return config_from_dict(cls, data.get("config", data)).validate()
+
+    @classmethod
+    def load(cls, path: str | Path) -> MatchConfig:
+        """The configuration recorded in a JSON file: a run's ``summary.json``, or ``to_dict()`` saved."""
+        try:
+            data = json.loads(Path(path).read_text())
+        except (OSError, json.JSONDecodeError) as error:
+            raise ConfigError(f"cannot read a configuration from {path}: {error}") from None
+        return cls.from_dict(data)
 
 
 PRESETS: dict[str, dict[str, Any]] = {
@@ -102,42 +134,56 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-def make_config(preset: str = "slime", **options: Any) -> MatchConfig:
-    """Build a validated MatchConfig from a preset name and flat overrides.
+def option_path(name: str) -> str:
+    """The dotted path of an option given by its flat name (``descriptor`` -> ``base.descriptor``), its short
+    name (:data:`SHORT_NAMES`) or its path; ConfigError for a name that is none of these."""
+    if "." in name:
+        return name
+    if name in SHORT_NAMES:
+        return SHORT_NAMES[name]
+    for prefix, cls in (("", MatchConfig), ("base.", BaseConfig), ("slime.", SlimeConfig)):
+        if name in {f.name for f in dataclasses.fields(cls)} - {"base", "slime"}:
+            return prefix + name
+    raise ConfigError(f"unknown option {name!r}: a field of MatchConfig, BaseConfig or SlimeConfig, one of "
+                      f"{', '.join(SHORT_NAMES)}, or a dotted path such as slime.tiles.t_xi")
 
-    Flat keys are looked up on MatchConfig, then BaseConfig (``descriptor``, ``shape``, ``upright``...),
-    then SlimeConfig; ``base="rootsift"`` (or "keynet") selects the base pipeline and ``scales=(1, 2)`` sets
-    the Slime block scales, ``same_homography="set"`` F-bar's literal two sets per tile (see
-    ``TileConfig``). Unknown keys raise ConfigError, and so do keys the method would not read: Slime's options
-    for a base pipeline run alone, a base pipeline's options for another base (``shape`` for RootSIFT), a
-    ``threshold`` without a post-processing RANSAC.
+
+def make_config(preset: str = "slime", **options: Any) -> MatchConfig:
+    """Build a validated MatchConfig from a preset name (or a registered base pipeline's name) and options.
+
+    Options are given by flat name (``descriptor="tfeat"``, ``workers=1``), short name (``scales=(1, 2)``,
+    ``same_homography="set"``) or dotted path (``**{"slime.tiles.t_xi": 12}``); a string value is read by the
+    option's type (as ``--set`` does). ``base="rootsift"`` selects the base pipeline; ``base=`` or ``slime=``
+    given a dataclass replaces that whole part. None values are skipped. Unknown options raise ConfigError,
+    and so do options the method would not read: Slime's options for a base pipeline run alone, a base
+    pipeline's options for another base (``shape`` for RootSIFT), a ``threshold`` without a post-processing
+    RANSAC.
     """
-    if not isinstance(preset, str) or preset not in PRESETS:
+    if not isinstance(preset, str) or (preset not in PRESETS and preset not in base_names()):
         raise ConfigError(f"unknown method/preset {preset!r}: choose one of {', '.join(PRESETS)}")
-    config = MatchConfig()
-    settings = {**PRESETS[preset], **{k: v for k, v in options.items() if v is not None}}
-    for key, value in settings.items():
-        if key == "base" and isinstance(value, str):
-            config.base.name = value
-        elif key == "scales":
-            config.slime.blocks = dataclasses.replace(config.slime.blocks, scales=tuple(value))
-        elif key == "same_homography":
-            config.slime.tiles = dataclasses.replace(config.slime.tiles, same_homography=value)
-        elif key in ("base", "slime") and dataclasses.is_dataclass(value):
-            setattr(config, key, copy.deepcopy(value))
-        elif _has_field(config, key) and key not in ("base", "slime"):
-            setattr(config, key, value)
-        elif _has_field(config.base, key):
-            setattr(config.base, key, value)
-        elif _has_field(config.slime, key):
-            setattr(config.slime, key, value)
-        else:
-            raise ConfigError(f"unknown option {key!r}")
-    if config.method in BASE_NAMES:
-        config.base.name = config.method
+    return with_options(_applied(MatchConfig(), PRESETS.get(preset, {"method": preset})), **options)
+
+
+def with_options(config: MatchConfig, **options: Any) -> MatchConfig:
+    """A validated copy of ``config`` with ``options`` set (named as for :func:`make_config`)."""
+    given = {key: value for key, value in options.items() if value is not None}
+    config = _applied(config, given)
     config.validate()
-    _refuse_unread(config, {key: value for key, value in options.items() if value is not None})
+    _refuse_unread(config, given)
     return config
+
+
+def _applied(config: MatchConfig, settings: dict[str, Any]) -> MatchConfig:
+    """``config`` with ``settings`` set; a method that runs a base pipeline alone names that pipeline."""
+    settings = dict(settings)
+    method = settings.pop("method", config.method)
+    for key, value in settings.items():
+        if key in ("base", "slime") and dataclasses.is_dataclass(value):
+            config = dataclasses.replace(config, **{key: copy.deepcopy(value)})
+        else:
+            config = set_option(config, option_path("base.name" if key == "base" else key), value)
+    config = dataclasses.replace(config, method=method)
+    return config if method == "slime" else set_option(config, "base.name", method)
 
 
 def _refuse_unread(config: MatchConfig, given: dict[str, Any]) -> None:
@@ -146,27 +192,19 @@ def _refuse_unread(config: MatchConfig, given: dict[str, Any]) -> None:
     slime = config.method == "slime"
     read = PIPELINES[config.base.name].options | ({"dtm"} if slime else set())  # Slime's global DTM reads dtm
     for key, value in given.items():
-        if key == "base" and isinstance(value, str):
+        if key == "base" and not dataclasses.is_dataclass(value):
             if not slime and value != config.method:
                 raise ConfigError(f"base {value!r} is the pipeline inside Slime, but method {config.method!r} runs "
                                   f"the {config.method} pipeline alone (use method 'slime' with base {value!r})")
-        elif key == "threshold" and config.ransac == "none":
+            continue
+        path = key if key in ("base", "slime") else option_path(key)
+        group, _, rest = path.partition(".")
+        if path == "threshold" and config.ransac == "none":
             raise ConfigError("threshold is the inlier threshold of the post-processing RANSAC, and ransac is "
                               "'none': choose a RANSAC (ransac=..., --ransac) or drop the threshold")
-        elif key in ("scales", "same_homography", "slime") or (
-                _has_field(config.slime, key) and not _has_field(config, key)):
-            if not slime:
-                raise ConfigError(f"{key!r} is a Slime option, but method {config.method!r} runs the "
-                                  f"{config.method} pipeline alone (use method 'slime' with base {config.method!r})")
-        elif _has_field(config.base, key) and key not in read | {"name"}:
+        if group == "slime" and not slime:
+            raise ConfigError(f"{key!r} is a Slime option, but method {config.method!r} runs the "
+                              f"{config.method} pipeline alone (use method 'slime' with base {config.method!r})")
+        if group == "base" and rest and rest.split(".")[0] not in read | {"name"}:
             raise ConfigError(f"the {config.base.name} base pipeline does not use {key!r} (it reads "
                               f"{', '.join(sorted(read))})")
-
-
-def _has_field(obj: Any, name: str) -> bool:
-    return any(f.name == name for f in dataclasses.fields(obj))
-
-
-def _choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
-    if value not in choices:
-        raise ConfigError(f"invalid {name} {value!r}: choose one of {', '.join(choices)}")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import numbers
 import types
 import typing
 from dataclasses import fields, is_dataclass
@@ -145,3 +146,18 @@ def option_paths(config: Any, prefix: str = "") -> list[str]:
         path = f"{prefix}{f.name}"
         out += option_paths(value, path + ".") if is_dataclass(value) else [path]
     return out
+
+
+def check_choice(name: str, value: Any, choices: tuple) -> None:
+    """ConfigError naming the choices when ``value`` is not one of them."""
+    if value not in choices:
+        raise ConfigError(f"invalid {name} {value!r}: choose one of {', '.join(map(str, choices))}")
+
+
+def check_integer(name: str, value: Any, minimum: int, optional: bool = False) -> None:
+    """ConfigError when ``value`` is not an integer of at least ``minimum`` (None allowed when ``optional``)."""
+    if optional and value is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
+        raise ConfigError(f"{name} must be an integer of at least {minimum}{' or None' if optional else ''}, "
+                          f"got {value!r}")

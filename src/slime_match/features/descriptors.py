@@ -20,6 +20,7 @@ from slime_match.features.laf import PatchPyramid
 from slime_match.features.weights import is_cached, load_model, load_state_dict
 
 DESCRIPTOR_METHODS = ("hardnet", "tfeat", "rootsift")
+DESCRIPTOR_CHOICES = ("auto", *DESCRIPTOR_METHODS)  # what a configuration may name; "auto": see resolve_descriptor
 
 
 @dataclass

@@ -21,6 +21,7 @@ from slime_match.features.laf import PatchPyramid, rotate_laf, set_laf_angle, up
 from slime_match.features.weights import load_model
 
 ORIENTATION_METHODS = ("orinet", "gradient", "upright", "fixed")
+ORIENTATION_CHOICES = ORIENTATION_METHODS[:3]  # what a configuration may name ("fixed" is Slime's own)
 
 
 @dataclass

@@ -16,6 +16,8 @@ from slime_match.types import GeometryResult
 
 KINDS = ("homography", "fundamental")
 BACKENDS = ("slime", "magsac", "poselib")
+# a configuration's post-processing RANSAC: none, or a kind by the paper's RANSACs or backend-kind
+RANSAC_CHOICES = ("none", *KINDS, *(f"{backend}-{kind}" for backend in BACKENDS[1:] for kind in KINDS))
 _MIN_SAMPLE = {"homography": 4, "fundamental": 8}
 _MAX_ITERATIONS = 10_000
 _CONFIDENCE = 0.999

@@ -35,8 +35,12 @@ import numpy as np
 import torch
 
 from ..errors import ConfigError
+from ..features.descriptors import DESCRIPTOR_CHOICES
+from ..features.orientation import ORIENTATION_CHOICES
+from ..features.shape import SHAPE_METHODS
 from ..matching.blob import BlobConfig
 from ..matching.dtm import DTMConfig
+from ..options import check_choice, check_integer
 from ..types import Features, Keypoints, Matches
 
 CandidateFilter = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -76,6 +80,18 @@ class BaseConfig:
     use_dtm: bool = True
     blob: BlobConfig = field(default_factory=BlobConfig)
     dtm: DTMConfig = field(default_factory=DTMConfig)
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> BaseConfig:
+        """Check the choices (ConfigError naming the valid ones); the name is checked against the registry
+        by ``MatchConfig``."""
+        check_choice("descriptor", self.descriptor, DESCRIPTOR_CHOICES)
+        check_choice("shape", self.shape, SHAPE_METHODS)
+        check_choice("orientation", self.orientation, ORIENTATION_CHOICES)
+        check_integer("max_keypoints", self.max_keypoints, 1)
+        return self
 
 
 class BasePipeline:

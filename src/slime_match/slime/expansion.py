@@ -30,11 +30,11 @@ from slime_match.slime import plane_kernels
 
 from .match_table import MatchTable
 
-__all__ = ["Expansion", "PlaneConfig", "expand_planes"]
+__all__ = ["RELATIVE_SCALE_MODES", "Expansion", "PlaneConfig", "expand_planes"]
 
 log = logging.getLogger("slime_match")
 
-_RELATIVE_SCALE_MODES = ("patch", "homography")
+RELATIVE_SCALE_MODES = ("patch", "homography")
 
 
 @dataclass
@@ -55,9 +55,9 @@ class PlaneConfig:
     relative_scale: str = "patch"
 
     def __post_init__(self) -> None:
-        if self.relative_scale not in _RELATIVE_SCALE_MODES:
+        if self.relative_scale not in RELATIVE_SCALE_MODES:
             raise ConfigError(
-                f"unknown relative_scale {self.relative_scale!r}; choose one of {_RELATIVE_SCALE_MODES}"
+                f"unknown relative_scale {self.relative_scale!r}; choose one of {RELATIVE_SCALE_MODES}"
             )
         if self.t_perp <= 0 or self.t_theta <= 0 or self.t_sigma < 1:
             raise ConfigError("PlaneConfig: need t_perp > 0, t_theta > 0, t_sigma >= 1")

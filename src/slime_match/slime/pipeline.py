@@ -24,14 +24,15 @@ from .._runtime.timing import StageTimer
 from ..geometry import ransac_kernels
 from ..geometry.frames import Frame, homographies_to_original
 from ..geometry.ransac import HomographyRansacConfig
+from ..options import check_choice, check_integer
 from ..pipelines import BasePipeline
 from .block_planes import block_planes
 from .blocks import Block, BlockConfig, make_blocks, make_tiles
 from .diagnostics import empty_result_reason, layout_warning, tile_count_warning
 from .expansion import Expansion, PlaneConfig, expand_planes
 from .level_cache import LevelCache, feature_levels
-from .levels import LevelRequest
-from .refine import FlowGuide, PlaneGuide, TileMatches, final_matches, match_tiles, tile_test
+from .levels import DETECTIONS, LevelRequest
+from .refine import TILE_TESTS, FlowGuide, PlaneGuide, TileMatches, final_matches, match_tiles, tile_test
 from .selection import select_planes
 from .tile_sets import TileConfig
 
@@ -85,6 +86,20 @@ class SlimeConfig:
     detection: str | None = None
     tile_detection: str = "scale"
     tile_test: str = "flow"
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> SlimeConfig:
+        """Check the choices and counts (ConfigError naming the valid ones)."""
+        check_integer("workers", self.workers, 1, optional=True)
+        check_integer("bins", self.bins, 1)
+        check_integer("min_plane_matches", self.min_plane_matches, 4)
+        if self.detection is not None:
+            check_choice("detection", self.detection, DETECTIONS)
+        check_choice("tile_detection", self.tile_detection, DETECTIONS)
+        check_choice("tile_test", self.tile_test, TILE_TESTS)
+        return self
 
 
 @dataclass

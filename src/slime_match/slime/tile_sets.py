@@ -32,12 +32,12 @@ from slime_match.slime.tile_kernels import greedy_cover, tile_pair_sets
 from .blocks import Block, points_in_blocks
 from .match_table import MatchTable
 
-__all__ = ["TileConfig", "TileSets", "best_sets_per_tile", "best_sets_per_tile_pair", "tile_sets"]
+__all__ = ["SAME_HOMOGRAPHY", "TileConfig", "TileSets", "best_sets_per_tile", "best_sets_per_tile_pair", "tile_sets"]
 
 log = logging.getLogger("slime_match")
 
 
-_SAME_HOMOGRAPHY = ("shared", "iou", "set")
+SAME_HOMOGRAPHY = ("shared", "iou", "set")
 
 
 @dataclass
@@ -76,9 +76,9 @@ class TileConfig:
             raise ConfigError("TileConfig: q_pair, q_tile, bins, chunk must be >= 1 and min_union >= 8")
         if self.t_perp <= 0 or self.t_xi < 0 or not 0 <= self.t_ov < 1 or self.t_theta_plus <= 0:
             raise ConfigError("TileConfig: need t_perp > 0, t_xi >= 0, 0 <= t_ov < 1, t_theta_plus > 0")
-        if self.same_homography not in _SAME_HOMOGRAPHY:
+        if self.same_homography not in SAME_HOMOGRAPHY:
             raise ConfigError(f"TileConfig: same_homography {self.same_homography!r} is not one of "
-                              f"{', '.join(_SAME_HOMOGRAPHY)}")
+                              f"{', '.join(SAME_HOMOGRAPHY)}")
 
 
 DEFAULTS = TileConfig()  # the defaults, for the signatures of Secs. 3.5-3.7

@@ -1,0 +1,119 @@
+"""Configuration: options by flat, short or dotted name, each checked where it is defined, and read back from
+a run's summary."""
+
+import json
+
+import pytest
+
+import slime_match as sm
+from slime_match.config import MatchConfig, option_path, with_options
+from slime_match.options import config_from_dict, option_paths, parse_value, set_option
+from slime_match.slime.blocks import BlockConfig
+from slime_match.slime.pipeline import SlimeConfig
+from slime_match.slime.tile_sets import TileConfig
+
+
+def test_option_paths_of_flat_short_and_dotted_names():
+    assert option_path("descriptor") == "base.descriptor"
+    assert option_path("workers") == "slime.workers"
+    assert option_path("threshold") == "threshold"
+    assert option_path("scales") == "slime.blocks.scales"
+    assert option_path("slime.tiles.t_xi") == "slime.tiles.t_xi"
+    with pytest.raises(sm.ConfigError, match="unknown option 'nope'.*slime.tiles.t_xi"):
+        option_path("nope")
+    paths = option_paths(MatchConfig())
+    assert {"slime.tiles.t_xi", "base.blob.shortlist_k", "slime.blocks.scales", "max_side"} <= set(paths)
+    assert len(paths) == len(set(paths))
+
+
+def test_dotted_options_reach_every_nested_field():
+    config = sm.make_config("slime", descriptor="tfeat", **{"slime.tiles.t_xi": 12, "slime.planes.t_theta": "1.0",
+                                                           "base.dtm.max_iterations": "50"})
+    assert config.slime.tiles.t_xi == 12 and config.slime.planes.t_theta == 1.0
+    assert config.base.dtm.max_iterations == 50 and config.base.descriptor == "tfeat"
+    assert sm.make_config("slime").slime.tiles.t_xi == 9.0  # presets are not changed
+
+
+def test_set_option_reads_strings_by_type_and_rebuilds_the_path():
+    config = MatchConfig()
+    changed = set_option(config, "slime.blocks.scales", "1,2")
+    assert changed.slime.blocks.scales == (1, 2) and config.slime.blocks.scales == (1, 2, 3)
+    assert changed.slime.tiles is config.slime.tiles  # only the dataclasses on the path are rebuilt
+    assert set_option(config, "slime.detection", "none").slime.detection is None
+    assert set_option(config, "max_side", "640").max_side == 640
+    assert set_option(config, "base.upright", "true").base.upright is True
+    assert parse_value("none", int | None) is None and parse_value("0.5", float) == 0.5
+
+
+@pytest.mark.parametrize(("path", "value", "message"), [
+    ("slime.tiles.t_xi", "many", "option 'slime.tiles.t_xi': cannot read 'many' as float"),
+    ("slime.tiles.same_homography", "all", "same_homography 'all' is not one of shared, iou, set"),
+    ("slime.blocks.scales", "1,1", "scales must be distinct"),
+    ("slime.tile_test", "edge", "invalid tile_test 'edge': choose one of flow, plane"),
+    ("slime.workers", "0", "workers must be an integer of at least 1 or None, got 0"),
+    ("base.descriptor", "sift", "invalid descriptor 'sift': choose one of auto, hardnet, tfeat, rootsift"),
+    ("slime.tiles.nope", "1", "unknown option 'slime.tiles.nope': TileConfig has q_pair"),
+    ("slime.nope.x", "1", "'slime.nope' is not a group of options"),
+    ("base.descriptor.x", "1", "'base.descriptor' is not a group of options"),
+])
+def test_set_option_refuses_unknown_paths_and_bad_values(path, value, message):
+    with pytest.raises(sm.ConfigError, match=message):
+        set_option(MatchConfig(), path, value)
+
+
+def test_each_dataclass_checks_its_own_values():
+    with pytest.raises(sm.ConfigError, match="invalid detection 'tile'"):
+        SlimeConfig(detection="tile")
+    with pytest.raises(sm.ConfigError, match="invalid device 'tpu'"):
+        MatchConfig(device="tpu")
+    with pytest.raises(sm.ConfigError, match="min_plane_matches must be an integer of at least 4"):
+        SlimeConfig(min_plane_matches=3)
+    with pytest.raises(sm.ConfigError, match="max_side must be an integer of at least"):
+        MatchConfig(max_side=8)
+    config = sm.make_config("slime")
+    config.slime.tile_test = "edge"  # set after construction: validate (as the Matcher does) finds it
+    with pytest.raises(sm.ConfigError, match="invalid tile_test"):
+        config.validate()
+
+
+def test_dotted_slime_options_are_refused_for_a_base_alone():
+    with pytest.raises(sm.ConfigError, match="'slime.tiles.t_xi' is a Slime option"):
+        sm.make_config("hz+", **{"slime.tiles.t_xi": 3})
+    with pytest.raises(sm.ConfigError, match="rootsift base pipeline does not use 'base.blob.shortlist_k'"):
+        sm.make_config("rootsift", **{"base.blob.shortlist_k": 3})
+
+
+def test_a_summary_reads_back_to_the_same_configuration(tmp_path):
+    config = sm.make_config("slime-rootsift", scales=(1, 2), workers=1, **{"slime.tiles.t_xi": 12})
+    summary = {"method": "slime", "config": json.loads(json.dumps(config.to_dict())), "counts": {}}
+    assert MatchConfig.from_dict(summary) == config == MatchConfig.from_dict(config.to_dict())
+    (tmp_path / "summary.json").write_text(json.dumps(summary))
+    loaded = MatchConfig.load(tmp_path / "summary.json")
+    assert loaded == config and isinstance(loaded.slime.blocks.scales, tuple)
+    assert with_options(loaded, method="hz+").base.name == "hz+"
+    bad = {**config.to_dict(), "slime": {**config.to_dict()["slime"], "t_xi": 3}}
+    with pytest.raises(sm.ConfigError, match=r"unknown SlimeConfig option\(s\) \['t_xi'\]"):
+        MatchConfig.from_dict(bad)
+    (tmp_path / "broken.json").write_text("{")
+    with pytest.raises(sm.ConfigError, match="cannot read a configuration"):
+        MatchConfig.load(tmp_path / "broken.json")
+
+
+def test_config_from_dict_builds_nested_dataclasses():
+    built = config_from_dict(SlimeConfig, {"blocks": {"scales": [1, 2]}, "tiles": {"t_xi": 4.0}, "workers": 2})
+    assert built.blocks == BlockConfig(scales=(1, 2)) and built.tiles == TileConfig(t_xi=4.0) and built.workers == 2
+
+
+def test_a_registered_base_pipeline_runs_alone_by_its_name():
+    from slime_match.pipelines import PIPELINES, register_pipeline
+    from slime_match.pipelines.rootsift import RootSiftPipeline
+
+    class Mine(RootSiftPipeline):
+        pass
+
+    register_pipeline("mine-config-test", Mine)
+    try:
+        config = sm.make_config("mine-config-test", fginn_ratio=0.9)
+        assert config.method == config.base.name == "mine-config-test" and config.base.fginn_ratio == 0.9
+    finally:
+        del PIPELINES["mine-config-test"]
