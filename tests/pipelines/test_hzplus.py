@@ -17,7 +17,7 @@ PAIRS = [("oxford_graf", "img1.png", f"img{k}.png", f"H1to{k}p") for k in (2, 3)
 
 
 def sift_mutual_ratio(grey0: np.ndarray, grey1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """OpenCV SIFT (8000 features) + RootSIFT + mutual ratio test 0.9: the issue's reference baseline."""
+    """OpenCV SIFT (8000 features) + RootSIFT + mutual ratio test 0.9: the reference baseline."""
     sift = cv2.SIFT_create(nfeatures=8000)
     out = []
     for grey in (grey0, grey1):
