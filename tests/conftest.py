@@ -23,6 +23,13 @@ if WEIGHTS.is_dir():
     os.environ.setdefault("TORCH_HOME", str(WEIGHTS))
 
 
+@pytest.fixture(params=["cpu", pytest.param("cuda", marks=pytest.mark.skipif(
+    not torch.cuda.is_available(), reason="needs a CUDA GPU"))])
+def device(request) -> torch.device:
+    """Each device a test runs on: the CPU, and CUDA where a GPU is present (skipped elsewhere)."""
+    return torch.device(request.param)
+
+
 def require(path: Path) -> Path:
     """Skip the calling test when a ../shared file it reads is absent (e.g. a user's clone)."""
     if not path.exists():
