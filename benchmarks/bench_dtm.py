@@ -10,7 +10,7 @@ keep, removed_at, restored. ``--record`` writes it: every call of one weight-fre
 1 -> 3 at 640x480 (``bench_slime.py``'s pair), in this process (669 calls at the time of writing). ``--every N`` takes every N-th call. A round runs all calls once, in this
 process, on one thread; the reported times are the smallest over ``--repeat`` rounds: wall-clock seconds
 and this process's CPU seconds (less sensitive to other processes on a busy machine). ``--baseline REV``
-also times the DTM of that git revision (its ``dtm.py`` and the compiled-loop modules it imports, compiled
+also times the DTM of that git revision (its ``dtm.py`` and the DTM modules it imports, their loops compiled
 afresh), its rounds alternating with the current code's, so both see the same machine load. The JSON also
 has ms per call, whether every output equals the recorded one and the fraction of candidates whose keep
 flag does, and the 1-minute load average before and after. The exit status is 1 when the current code's
@@ -40,7 +40,8 @@ from slime_match.matching import dtm
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "src/slime_match/matching"
-KERNEL_MODULES = ("delaunay", "dtm_kernels")  # compiled loops dtm.py imports, in the revisions that have them
+# the DTM modules dtm.py imports, each after those it imports, in the revisions that have them
+DTM_MODULES = ("delaunay", "dtm_kernels", "dtm_contraction_kernels", "dtm_mesh")
 
 
 def _git_show(rev: str, path: str) -> str | None:
@@ -59,17 +60,17 @@ def _load(name: str, source: str, folder: Path) -> ModuleType:
 
 
 def load_baseline(rev: str, folder: Path) -> ModuleType:
-    """The dtm module of a git revision with that revision's kernel modules, importable next to the current
+    """The dtm module of a git revision with that revision's DTM modules, importable next to the current
     ones (same package, other names)."""
     source = _git_show(rev, f"{PACKAGE}/dtm.py")
     if source is None:
         raise SystemExit(f"{rev}: no {PACKAGE}/dtm.py")
-    for name in KERNEL_MODULES:
-        kernels = _git_show(rev, f"{PACKAGE}/{name}.py")
-        if kernels is not None:
-            for other in KERNEL_MODULES:
-                kernels = kernels.replace(f"from .{other} import", f"from ._baseline_{other} import")
-            _load(f"_baseline_{name}", kernels, folder)
+    for name in DTM_MODULES:
+        module = _git_show(rev, f"{PACKAGE}/{name}.py")
+        if module is not None:
+            for other in DTM_MODULES:
+                module = module.replace(f"from .{other} import", f"from ._baseline_{other} import")
+            _load(f"_baseline_{name}", module, folder)
             source = source.replace(f"from .{name} import", f"from ._baseline_{name} import")
     return _load("_baseline_dtm", source, folder)
 

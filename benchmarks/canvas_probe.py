@@ -21,16 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from slime_match.eval.bench import (
-    BenchConfig,
-    collect_pairs,
-    evaluate_pair,
-    load_pair_images,
-    pair_gt,
-    predict,
-)
+from slime_match.eval.bench_config import BenchConfig
 from slime_match.eval.datasets import Pair, rotated_pair, transform_view
 from slime_match.eval.methods import make_method
+from slime_match.eval.predictions import collect_pairs, load_pair_images, predict
+from slime_match.eval.scoring import evaluate_pair, pair_gt
 from slime_match.io import load_image
 
 

@@ -148,7 +148,7 @@ matplotlib.use("svg")
 import matplotlib.pyplot as plt
 import numpy as np
 import slime_match as sm
-from slime_match.eval import report
+from slime_match.eval import figures
 from slime_match.slime import visualize
 from slime_match.viz import plot_matches
 mine = plt.figure()

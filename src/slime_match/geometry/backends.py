@@ -6,12 +6,8 @@ import cv2
 import numpy as np
 
 from slime_match.errors import ConfigError
-from slime_match.geometry.ransac import (
-    FundamentalRansacConfig,
-    HomographyRansacConfig,
-    ransac_fundamental,
-    ransac_homography,
-)
+from slime_match.geometry.fundamental_ransac import ransac_fundamental
+from slime_match.geometry.ransac import FundamentalRansacConfig, HomographyRansacConfig, ransac_homography
 from slime_match.types import GeometryResult
 
 KINDS = ("homography", "fundamental")

@@ -1,4 +1,5 @@
-"""Slime's RANSACs (paper SM "RANSAC implementations"): planar homography and fundamental matrix.
+"""Slime's RANSAC options and adaptive stopping (paper SM "RANSAC implementations"), and its planar homography
+RANSAC, on one problem or on many at once.
 
 Hypotheses are drawn and scored in vectorised batches (``config.batch`` models at a time, all
 problems of :func:`ransac_homography_many` together). The adaptive iteration bound
@@ -8,7 +9,6 @@ draw up to one batch more models than a strictly sequential RANSAC would.
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TypeVar
@@ -16,19 +16,12 @@ from typing import TypeVar
 import numpy as np
 
 from slime_match.errors import ConfigError
-from slime_match.geometry.fundamental import (
-    epipolar_distance_batch,
-    fundamental_8point,
-    fundamental_8point_batch,
-    fundamental_from_homography_and_parallax_batch,
-)
-from slime_match.geometry.homography import homography_dlt, homography_dlt_batch
+from slime_match.geometry.homography import homography_dlt
 from slime_match.geometry.ransac_kernels import far_samples, inlier_counts, inlier_mask, minimal_homographies
-from slime_match.geometry.sampling import sample_subsets, sample_subsets_varying
+from slime_match.geometry.ransac_problems import _Stack
+from slime_match.geometry.sampling import sample_subsets_varying
 from slime_match.options import config_from_dict
 from slime_match.types import GeometryResult
-
-logger = logging.getLogger("slime_match")
 
 
 @dataclass
@@ -121,24 +114,6 @@ def _iteration_bound(inliers: np.ndarray, n: np.ndarray, sample_size: int, cfg: 
     return np.clip(np.ceil(bound), cfg.min_iterations, cfg.max_iterations).astype(np.int64)
 
 
-def _pair_gap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(...) distance between correspondences a and b (..., 4) = (x0, y0, x1, y1): the smaller of both images."""
-    d = a - b
-    d *= d
-    return np.sqrt(np.minimum(d[..., 0] + d[..., 1], d[..., 2] + d[..., 3]))
-
-
-def _has_far_quadruple(x: np.ndarray, t: float) -> bool:
-    """Whether some 4 of the (n, 4) correspondences pass the sample distance test (``far_samples``).
-
-    Such a sample is a 4-clique of the graph joining the pairs farther than t apart: an edge (i, j) whose
-    common neighbours hold an edge. Memory and time grow as n^3 and n^4: meant for small n.
-    """
-    far = (_pair_gap(x[:, None], x[None]) > t).astype(np.float64)  # (n, n), zero diagonal
-    common = far[:, None, :] * far[None, :, :]  # (n, n, n): k joined to both i and j
-    return bool((((common @ far) * common).sum(axis=2) * far).any())
-
-
 def _consistent_side(h: np.ndarray, xs: np.ndarray) -> np.ndarray:
     """(M,) side (+1/-1) of each (M, k, 2) sample under its homography, 0 when the points disagree."""
     w = np.einsum("mij,mkj->mki", h[:, 2:3, :2], xs)[..., 0] + h[:, 2:3, 2]
@@ -150,34 +125,6 @@ def _homography_inliers(h: np.ndarray, side: float, x0: np.ndarray, x1: np.ndarr
     """(K,) inliers of one homography on (K, 2) correspondences: two-sided error < t pixels and the plane side
     (``side * w > 0`` for ``w`` the third coordinate of ``H [x0; 1]``)."""
     return inlier_mask(np.ascontiguousarray(h, dtype=np.float64), float(side), np.hstack([x0, x1]), float(t))
-
-
-class _Stack:
-    """Correspondence sets of many problems stored flat: problem p is rows ``offset[p]`` to ``offset[p] + n[p] - 1``
-    of the (N, 4) rows (x0, y0, x1, y1), pixels."""
-
-    def __init__(self, problems: list[tuple[np.ndarray, np.ndarray]]) -> None:
-        xs0, xs1 = [], []
-        for a, b in problems:
-            a = np.asarray(a, dtype=np.float64).reshape(-1, 2)
-            b = np.asarray(b, dtype=np.float64).reshape(-1, 2)
-            if a.shape != b.shape:
-                raise ValueError(f"x0 and x1 must have the same shape, got {a.shape} and {b.shape}")
-            xs0.append(a)
-            xs1.append(b)
-        self.x0s, self.x1s = xs0, xs1
-        self.n = np.array([len(a) for a in xs0], dtype=np.int64)
-        self.offset = np.concatenate([[0], np.cumsum(self.n)[:-1]]).astype(np.int64)
-        empty = [np.zeros((0, 2))]
-        self.rows = np.hstack([np.concatenate(xs0 + empty), np.concatenate(xs1 + empty)])  # (N, 4): x0 y0 x1 y1
-
-    def without_far_sample(self, t: float, candidates: np.ndarray, max_n: int = 64) -> np.ndarray:
-        """(P,) True for the candidate problems (4 <= n <= max_n) proven to hold no 4 correspondences pairwise
-        farther than t: every sample of theirs fails the distance test."""
-        check = np.flatnonzero(candidates & (self.n >= 4) & (self.n <= max_n))
-        out = np.zeros(len(self.n), dtype=bool)
-        out[check] = [not _has_far_quadruple(self.rows[self.offset[p]:self.offset[p] + self.n[p]], t) for p in check]
-        return out
 
 
 def _finish_homography(
@@ -295,171 +242,3 @@ def ransac_homography(
         GeometryResult of kind "homography" (model None and no inliers when no model can be fitted).
     """
     return ransac_homography_many([(x0, x1)], config, seed)[0]
-
-
-def _best_first(counts: np.ndarray) -> int:
-    return int(np.argmax(counts))  # argmax returns the first maximum: the earliest drawn model
-
-
-def _epipolar_counts(
-    f: np.ndarray, x0: np.ndarray, x1: np.ndarray, t: float, max_elements: int
-) -> np.ndarray:
-    """(M,) inlier counts of M fundamental matrices on all correspondences."""
-    chunk = max(1, max_elements // max(len(x0), 1))
-    return np.concatenate(
-        [(epipolar_distance_batch(f[s : s + chunk], x0, x1) < t).sum(axis=1) for s in range(0, len(f), chunk)]
-        or [np.zeros(0, dtype=np.int64)]
-    )
-
-
-def _homography_counts(h: np.ndarray, side: np.ndarray, x0: np.ndarray, x1: np.ndarray, t: float) -> np.ndarray:
-    """(M,) inlier counts of M homographies (two-sided error and plane side) on all (K, 2) correspondences."""
-    start, n = np.zeros(len(h), dtype=np.int64), np.full(len(h), len(x0), dtype=np.int64)
-    return inlier_counts(np.ascontiguousarray(h), side, np.hstack([x0, x1]), start, n, float(t))
-
-
-def _refine_fundamental(
-    f: np.ndarray, x0: np.ndarray, x1: np.ndarray, cfg: FundamentalRansacConfig
-) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares 8-point refit on the inliers of f, kept only if no inlier is lost."""
-    inl = epipolar_distance_batch(f[None], x0, x1)[0] < cfg.threshold
-    if cfg.refine and inl.sum() > 8:
-        f2, _ = fundamental_8point(x0[inl], x1[inl])
-        inl2 = epipolar_distance_batch(f2[None], x0, x1)[0] < cfg.threshold
-        if inl2.sum() >= inl.sum():
-            return f2, inl2
-    return f, inl
-
-
-def ransac_fundamental(
-    x0: np.ndarray,
-    x1: np.ndarray,
-    config: FundamentalRansacConfig | dict | None = None,
-    seed: int | None = 0,
-) -> GeometryResult:
-    """Fundamental matrix RANSAC with plane + parallax completion (paper SM).
-
-    8-point samples are drawn in batches; a degenerate 8-point sample (2nd smallest singular value
-    below ``degeneracy_threshold``) yields a least-squares DLT homography of the same 8 points instead
-    (skipped if degenerate too). The best F and the best H are tracked separately and the adaptive
-    bound (sample size 8) follows the best of both. Afterwards a second RANSAC samples two
-    correspondences outside the best H's inliers and builds ``F = [e']_x H`` (plane + parallax). The
-    best 8-point F and the best plane + parallax F are refined by least-squares 8-point on their
-    inliers and the one with more inliers wins.
-
-    Args:
-        x0: (K, 2) points in image 0, pixels.
-        x1: (K, 2) corresponding points in image 1, pixels.
-        config: options (dataclass, dict or None for the defaults).
-        seed: random seed (None: nondeterministic).
-
-    Returns:
-        GeometryResult of kind "fundamental" with ``x1^T F x0 = 0`` (unit norm). Its kind is
-        "homography" (the refined best H, as in :func:`ransac_homography`) when no F has at least as
-        many inliers as the best homography, e.g. when no correspondence lies off the plane. model is
-        None with no inliers when neither model can be fitted (fewer than 8 matches, degenerate data).
-        ``info["source"]`` tells "8-point", "plane+parallax" or "homography".
-    """
-    cfg = make_config(FundamentalRansacConfig, config)
-    rng = np.random.default_rng(seed)
-    x0 = np.asarray(x0, dtype=np.float64).reshape(-1, 2)
-    x1 = np.asarray(x1, dtype=np.float64).reshape(-1, 2)
-    if x0.shape != x1.shape:
-        raise ValueError(f"x0 and x1 must have the same shape, got {x0.shape} and {x1.shape}")
-    n = len(x0)
-    info: dict = {"backend": "slime", "threshold": cfg.threshold}
-    if n < 8:
-        info["reason"] = f"{n} correspondences, fewer than 8"
-        return GeometryResult("fundamental", None, np.zeros(n, dtype=bool), info)
-    best_f, best_f_count = None, 0
-    best_h, best_h_side, best_h_count = None, 0.0, 0
-    iters, bound = 0, cfg.max_iterations
-    while iters < max(cfg.min_iterations, bound):
-        cnt = min(max(cfg.min_iterations, bound) - iters, cfg.batch)
-        iters += cnt
-        idx = sample_subsets(rng, n, 8, cnt)
-        s0, s1 = x0[idx], x1[idx]
-        f, sigma_f = fundamental_8point_batch(s0, s1)
-        degenerate = sigma_f < cfg.degeneracy_threshold
-        f = f[~degenerate]
-        if len(f):
-            counts = _epipolar_counts(f, x0, x1, cfg.threshold, cfg.max_elements)
-            b = _best_first(counts)
-            if counts[b] > best_f_count:
-                best_f, best_f_count = f[b], int(counts[b])
-        if degenerate.any():
-            h, sigma_h = homography_dlt_batch(s0[degenerate], s1[degenerate])
-            side = _consistent_side(h, s0[degenerate])
-            ok = (sigma_h >= cfg.degeneracy_threshold) & (side != 0)
-            h, side = h[ok], side[ok]
-            if len(h):
-                counts = _homography_counts(h, side, x0, x1, cfg.threshold)
-                b = _best_first(counts)
-                if counts[b] > best_h_count:
-                    best_h, best_h_side, best_h_count = h[b], float(side[b]), int(counts[b])
-        top = max(best_f_count, best_h_count)
-        bound = (
-            int(_iteration_bound(np.array([top]), np.array([n]), 8, cfg)[0]) if top else cfg.max_iterations
-        )
-    info["iterations"] = iters
-    candidates: list[tuple[np.ndarray, str]] = []
-    if best_f is not None:
-        candidates.append((best_f, "8-point"))
-    if best_h is not None:
-        pp, pp_iters = _plane_parallax(best_h, best_h_side, x0, x1, cfg, rng)
-        info["parallax_iterations"] = pp_iters
-        if pp is not None:
-            candidates.append((pp, "plane+parallax"))
-    refined = [(*_refine_fundamental(f, x0, x1, cfg), source) for f, source in candidates]
-    hom = None
-    if best_h is not None:
-        hom_cfg = HomographyRansacConfig(
-            threshold=cfg.threshold, degeneracy_threshold=cfg.degeneracy_threshold, refine=cfg.refine
-        )
-        hom = _finish_homography(best_h, best_h_side, x0, x1, hom_cfg, dict(info))
-        info["homography_inliers"] = int(hom.inliers.sum())
-    if refined:
-        f, inl, source = max(refined, key=lambda r: int(r[1].sum()))  # first of equals: 8-point
-        if hom is None or inl.sum() > hom.inliers.sum():
-            info.update(source=source, num_inliers=int(inl.sum()))
-            return GeometryResult("fundamental", f, inl, info)
-    if hom is not None:
-        hom.info.update(source="homography", homography_inliers=int(hom.inliers.sum()))
-        return hom
-    info["reason"] = "every sample was degenerate"
-    return GeometryResult("fundamental", None, np.zeros(n, dtype=bool), info)
-
-
-def _plane_parallax(
-    h: np.ndarray,
-    side: float,
-    x0: np.ndarray,
-    x1: np.ndarray,
-    cfg: FundamentalRansacConfig,
-    rng: np.random.Generator,
-) -> tuple[np.ndarray | None, int]:
-    """RANSAC over pairs of off-plane correspondences completing the plane h into F = [e']_x h.
-
-    Returns:
-        The best F (None if fewer than 2 off-plane matches or all pairs degenerate) and the models drawn.
-    """
-    on_plane = _homography_inliers(h, side, x0, x1, cfg.threshold)
-    off = np.flatnonzero(~on_plane)
-    if len(off) < 2:
-        return None, 0
-    best_f, best_count, iters, bound = None, 0, 0, cfg.max_iterations
-    n_on = int(on_plane.sum())
-    while iters < max(cfg.min_iterations, bound):
-        cnt = min(max(cfg.min_iterations, bound) - iters, cfg.batch)
-        iters += cnt
-        idx = off[sample_subsets(rng, len(off), 2, cnt)]
-        f, ok = fundamental_from_homography_and_parallax_batch(h, x0[idx], x1[idx])
-        f = f[ok]
-        if len(f):
-            counts = _epipolar_counts(f, x0, x1, cfg.threshold, cfg.max_elements)
-            b = _best_first(counts)
-            if counts[b] > best_count:
-                best_f, best_count = f[b], int(counts[b])
-                off_inliers = np.array([max(best_count - n_on, 0)])
-                bound = int(_iteration_bound(off_inliers, np.array([len(off)]), 2, cfg)[0])
-    return best_f, iters

@@ -6,7 +6,6 @@ import csv
 import json
 import logging
 import math
-import re
 import shutil
 
 import cv2
@@ -14,9 +13,9 @@ import numpy as np
 import pytest
 from conftest import DATA, require
 
-from slime_match.errors import ConfigError
-from slime_match.eval import bench, methods, report
+from slime_match.eval import aggregation, bench, methods
 from slime_match.eval import metrics as M
+from slime_match.eval.bench_config import BenchConfig
 from slime_match.eval.code_version import UNKNOWN, code_version
 
 HZ_FREE = "hz+:descriptor=rootsift,shape=baumberg,orientation=gradient,max_keypoints=600"
@@ -114,31 +113,6 @@ def test_rerun_loads_cache_without_recomputing(first_run, tiny_data, monkeypatch
     assert (out / "table.csv").read_text() == table  # metrics are deterministic under the seed
 
 
-def test_code_version_format():
-    assert re.fullmatch(r"\d+\.\d+\.\d+(\+g[0-9a-f]{4,40}(\.dirty)?)?", code_version())
-
-
-@pytest.mark.parametrize(
-    "git, expected",
-    [
-        ({}, "0.1.0"),  # no git, or not a checkout
-        ({"rev-parse": "abc1234"}, "0.1.0"),  # a checkout that does not track the package (site-packages)
-        ({"rev-parse": "abc1234", "ls-files": "__init__.py", "status": ""}, "0.1.0+gabc1234"),
-        ({"rev-parse": "abc1234", "ls-files": "__init__.py", "status": " M x.py"}, "0.1.0+gabc1234.dirty"),
-    ],
-)
-def test_code_version_from_git(monkeypatch, git, expected):
-    from slime_match.eval import code_version as cv
-
-    monkeypatch.setattr(cv.slime_match, "__version__", "0.1.0")
-    monkeypatch.setattr(cv, "_git", lambda command, *_: git.get(command))
-    cv.code_version.cache_clear()
-    try:
-        assert cv.code_version() == expected
-    finally:
-        cv.code_version.cache_clear()
-
-
 def test_predictions_record_their_code_and_stale_ones_are_reported(first_run, tiny_data, tmp_path, caplog):
     out, _ = first_run
     summary = json.loads((out / "metrics.json").read_text())
@@ -194,7 +168,7 @@ def test_rotated_pairs_table(first_run):
     """The planar pairs are also reported split into original and rotated pairs, from the same records."""
     out, _ = first_run
     summary = json.loads((out / "metrics.json").read_text())
-    agg = report.aggregate(summary)
+    agg = aggregation.aggregate(summary)
     original, rotated = summary["pairs"][0], summary["pairs"][1]
     for method in summary["methods"]:
         for th in summary["config"]["thresholds"]:
@@ -224,7 +198,7 @@ def test_metrics_are_meaningful(first_run):
 def test_pose_pair_gets_auc(tmp_path):
     require(DATA / "scannet_sample")
     stats = bench.run_bench(
-        bench.BenchConfig(
+        BenchConfig(
             datasets=["scannet-sample"],
             methods=["opencv-sift"],
             output=str(tmp_path),
@@ -239,20 +213,3 @@ def test_pose_pair_gets_auc(tmp_path):
     assert set(errs) == {"0.5", "1", "2", "3"}
     table = (tmp_path / "table.md").read_text()
     assert "### Pose AUC" in table and "| OpenCV SIFT | 2 |" in table
-
-
-def test_method_specs():
-    assert methods.parse_method_spec("hz+:descriptor=tfeat,max_keypoints=500,upright=true") == (
-        "hz+",
-        {"descriptor": "tfeat", "max_keypoints": 500, "upright": True},
-    )
-    assert methods.method_label("keynet:max_keypoints=100") == "keynet_max_keypoints-100"
-    with pytest.raises(ConfigError):
-        methods.parse_method_spec("superglue")
-    with pytest.raises(ConfigError):
-        methods.make_method("hz+:no_such_option=1")
-    with pytest.raises(ConfigError):
-        methods.make_method("opencv-sift:ratio=2")
-    with pytest.raises(ConfigError):
-        bench.BenchConfig(methods=["rootsift", "rootsift"]).validate()
-    assert set(methods.PAPER_METHODS) <= set(methods.REGISTRY)

@@ -1,0 +1,123 @@
+"""The benchmark's tables from the aggregate: the paper's Table "result_plot" (best threshold per method),
+planar original vs rotated pairs, SM "Detailed results" (every threshold), pose AUC and times, in Markdown;
+one CSV row per group, method and threshold."""
+
+from __future__ import annotations
+
+import csv
+import io
+from typing import Any
+
+from slime_match.eval.aggregation import GROUPS, ROTATION_GROUPS
+from slime_match.eval.methods import method_title
+
+COLUMNS = ("coverage", "precision", "accuracy", "no_match", "wrong_only")
+HEADERS = {
+    "coverage": "Coverage (%)",
+    "precision": "Precision (%)",
+    "accuracy": "Accuracy (%)",
+    "no_match": "No match pairs",
+    "wrong_only": "Wrong only pairs",
+}
+
+
+def _fmt(column: str, value: float) -> str:
+    return f"{value:.2f}" if column in ("coverage", "precision", "accuracy") else f"{int(value)}"
+
+
+def _thr(th: str) -> str:
+    return "--" if th == "none" else th
+
+
+def markdown_tables(summary: dict[str, Any], agg: dict[str, Any]) -> str:
+    """The report in Markdown: main table (best threshold), planar original vs rotated pairs, detailed table
+    (every threshold), pose AUC, times."""
+    methods, thresholds = list(summary["methods"]), summary["config"]["thresholds"]
+    groups = [g for g in GROUPS if any(k[0] == g for k in agg["rows"])]
+    counts = {g: next(v["pairs"] for k, v in agg["rows"].items() if k[0] == g) for g in groups}
+
+    def header(names) -> list[str]:
+        head = ["Method", "RANSAC thr. (px)"] + [f"{g}: {HEADERS[c]}" for g in names for c in COLUMNS]
+        return ["| " + " | ".join(head) + " |", "| " + " | ".join(["---"] * len(head)) + " |"]
+
+    def row(m: str, th: str, names=groups, table=agg["rows"]) -> str:
+        cells = [method_title(summary["methods"][m]), _thr(th)]
+        cells += [_fmt(c, table[(g, m, th)][c]) for g in names for c in COLUMNS]
+        return "| " + " | ".join(cells) + " |"
+
+    lines = [
+        f"Pairs: {', '.join(f'{g} {counts[g]}' for g in groups)}; accuracy = mAA (Eq. acc_formula, "
+        + f"1..{int(summary['config']['t_perp'])} px); best RANSAC threshold by {agg['best_group']} accuracy.",
+        "",
+        "### Main table (best RANSAC threshold per method)",
+        "",
+        *header(groups),
+    ]
+    lines += [row(m, agg["best"][m]) for m in methods]
+    if agg["rotation_rows"]:
+        rotation = agg["rotation_rows"]
+        sub = {g: next(v["pairs"] for k, v in rotation.items() if k[0] == g) for g in ROTATION_GROUPS}
+        lines += [
+            "",
+            "### Planar pairs: original vs rotated by the added rotations (best RANSAC threshold; "
+            + ", ".join(f"{g} {n}" for g, n in sub.items())
+            + " pairs)",
+            "",
+            *header(ROTATION_GROUPS),
+        ]
+        lines += [row(m, agg["best"][m], ROTATION_GROUPS, rotation) for m in methods]
+    lines += [
+        "",
+        "### Detailed results (every RANSAC threshold; -- = no RANSAC)",
+        "",
+        *header(groups),
+    ]
+    lines += [row(m, th) for m in methods for th in thresholds]
+    if agg["pose"]:
+        lines += [
+            "",
+            "### Pose AUC (pose pairs; LoFTR protocol, best essential-matrix threshold)",
+            "",
+            "| Method | RANSAC thr. (px) | AUC@5 (%) | AUC@10 (%) | AUC@20 (%) | essential thr. (px) |",
+            "| --- | --- | --- | --- | --- | --- |",
+        ]
+        for m in methods:
+            for th in thresholds:
+                v = agg["pose"][(m, th)]
+                lines.append(
+                    f"| {method_title(summary['methods'][m])} | {_thr(th)} | {v['auc@5']:.2f} | {v['auc@10']:.2f} | "
+                    f"{v['auc@20']:.2f} | {v['essential_threshold']} |"
+                )
+    lines += [
+        "",
+        "### Time per pair (matching only, models loaded; RANSAC excluded)",
+        "",
+        "| Method | mean seconds per pair | pairs | code version (pairs) |",
+        "| --- | --- | --- | --- |",
+    ]
+    for m in methods:
+        t = agg["seconds"][m]
+        code = ", ".join(f"{v} ({n})" for v, n in sorted(t["code"].items(), key=lambda kv: (-kv[1], kv[0])))
+        lines.append(f"| {method_title(summary['methods'][m])} | {t['mean']:.2f} | {t['pairs']} | {code} |")
+    return "\n".join(lines) + "\n"
+
+
+def csv_table(summary: dict[str, Any], agg: dict[str, Any]) -> str:
+    """One row per group, method and threshold (``best`` = 1 on the method's best threshold)."""
+    buf = io.StringIO()
+    writer = csv.writer(buf)
+    writer.writerow(["group", "method", "spec", "threshold", "best", *COLUMNS, "pairs", "seconds"])
+    for (group, m, th), v in agg["rows"].items():
+        writer.writerow(
+            [
+                group,
+                m,
+                summary["methods"][m],
+                th,
+                int(agg["best"][m] == th),
+                *(_fmt(c, v[c]) for c in COLUMNS),
+                v["pairs"],
+                f"{agg['seconds'][m]['mean']:.3f}",
+            ]
+        )
+    return buf.getvalue()

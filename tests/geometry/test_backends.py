@@ -1,0 +1,34 @@
+"""The robust estimators behind one interface: Slime's RANSAC, MAGSAC++ and PoseLib on known models."""
+
+import sys
+
+import numpy as np
+import pytest
+
+from slime_match.errors import ConfigError
+from slime_match.geometry.backends import estimate_geometry
+
+from .helpers import check_fundamental, check_homography, homography_problem, stereo_problem
+
+
+@pytest.mark.parametrize("backend", ["slime", "magsac", "poselib"])
+def test_backends_recover_known_models(backend):
+    rng = np.random.default_rng(7)
+    x0, x1, gt = homography_problem(rng, 400)
+    res = estimate_geometry(x0, x1, "homography", backend, threshold=3.0)
+    check_homography(res, x0, gt)
+    x0, x1, gt = stereo_problem(rng, 600)
+    res = estimate_geometry(x0, x1, "fundamental", backend, threshold=2.0)
+    check_fundamental(res, x0, x1, gt)
+    res = estimate_geometry(x0[:7], x1[:7], "fundamental", backend)
+    assert res.model is None and res.inliers.shape == (7,) and not res.inliers.any()
+
+
+def test_poselib_backend_without_poselib_is_a_clear_error(monkeypatch):
+    """PoseLib is optional (the "poselib" extra): without it the package imports and the other backends run."""
+    monkeypatch.setitem(sys.modules, "poselib", None)  # import poselib -> ImportError
+    rng = np.random.default_rng(3)
+    x0, x1, gt = homography_problem(rng, 200)
+    check_homography(estimate_geometry(x0, x1, "homography", "slime", threshold=3.0), x0, gt)
+    with pytest.raises(ConfigError, match="slime-match\\[poselib\\]"):
+        estimate_geometry(x0, x1, "homography", "poselib", threshold=3.0)
