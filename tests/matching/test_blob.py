@@ -151,13 +151,12 @@ def test_empty_and_device_and_config():
         BlobConfig(max_per_keypoint=0)
 
 
-@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
-def test_cuda_matches_cpu():
+def test_every_device_matches_as_the_cpu(device):
     d0, d1, xy0, xy1 = make_data(seed=4)
     t = [torch.from_numpy(a).float() for a in (d0, d1, xy0, xy1)]
     cpu = blob_match(*t)
-    gpu = blob_match(*[a.cuda() for a in t])
-    assert set(zip(cpu.idx0.tolist(), cpu.idx1.tolist())) == set(zip(gpu.idx0.tolist(), gpu.idx1.tolist()))
+    other = blob_match(*[a.to(device) for a in t])
+    assert set(zip(cpu.idx0.tolist(), cpu.idx1.tolist())) == set(zip(other.idx0.tolist(), other.idx1.tolist()))
 
 
 _WARM_CHECK = """
