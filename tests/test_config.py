@@ -6,8 +6,8 @@ import json
 import pytest
 
 import slime_match as sm
+from slime_match._runtime.options import config_from_dict, option_paths, parse_value, set_option
 from slime_match.config import MatchConfig, option_path, with_options
-from slime_match.options import config_from_dict, option_paths, parse_value, set_option
 from slime_match.slime.blocks import BlockConfig
 from slime_match.slime.pipeline import SlimeConfig
 from slime_match.slime.tile_sets import TileConfig

@@ -17,10 +17,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ._runtime.options import check_choice, check_integer, config_from_dict, set_option
 from .errors import ConfigError
 from .geometry.backends import RANSAC_CHOICES
 from .io import MIN_IMAGE_SIDE
-from .options import check_choice, check_integer, config_from_dict, set_option
 from .pipelines import PIPELINES, BaseConfig, base_names, unimplemented
 from .slime.pipeline import SlimeConfig
 

@@ -1,2 +1,2 @@
-"""Process-level helpers of the package (private): forked worker maps, the CPUs a process may use, stage
-timers, the OpenMP spin default and the numba compile notice."""
+"""Helpers of the package itself (private): forked worker maps, the CPUs a process may use, stage timers,
+configuration dataclasses from dicts and dotted names, the OpenMP spin default and the numba compile notice."""

@@ -30,13 +30,13 @@ from pathlib import Path
 
 import torch
 
+from slime_match._runtime.options import config_from_dict
 from slime_match.errors import ConfigError
 from slime_match.features.descriptors import Descriptor, DescriptorConfig
 from slime_match.features.gradients import DominantGradientOrientation, SIFTPatchDescriptor
 from slime_match.features.laf import PatchPyramid, ellipse_to_laf, set_laf_angle
 from slime_match.features.orientation import OrientationConfig, Orienter
 from slime_match.features.shape import ShapeConfig, ShapeEstimator, second_moment_shape
-from slime_match.options import config_from_dict
 from slime_match.types import Features, Keypoints
 
 logger = logging.getLogger("slime_match")

@@ -27,6 +27,7 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
+from slime_match._runtime.options import config_from_dict
 from slime_match.errors import ConfigError, ImageError
 from slime_match.features.image_ops import (
     blurred_rows,
@@ -36,7 +37,6 @@ from slime_match.features.image_ops import (
     max_filter,
     row_strips,
 )
-from slime_match.options import config_from_dict
 from slime_match.types import Keypoints
 
 logger = logging.getLogger("slime_match")

@@ -15,12 +15,12 @@ from typing import TypeVar
 
 import numpy as np
 
+from slime_match._runtime.options import config_from_dict
 from slime_match.errors import ConfigError
 from slime_match.geometry.homography import homography_dlt
 from slime_match.geometry.ransac_kernels import far_samples, inlier_counts, inlier_mask, minimal_homographies
 from slime_match.geometry.ransac_problems import _Stack
 from slime_match.geometry.sampling import sample_subsets_varying
-from slime_match.options import config_from_dict
 from slime_match.types import GeometryResult
 
 

@@ -14,8 +14,8 @@ from functools import cache
 import numpy as np
 import torch
 
+from .._runtime.options import config_from_dict
 from ..errors import ConfigError
-from ..options import config_from_dict
 from ..types import Matches
 from . import nn_kernels
 from .nn import knn, nearest_far

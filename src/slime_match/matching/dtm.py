@@ -49,8 +49,8 @@ from functools import cache
 
 import numpy as np
 
+from .._runtime.options import config_from_dict
 from ..errors import ConfigError
-from ..options import config_from_dict
 from .delaunay import MAX_SIDE
 from .dtm_contraction_kernels import contraction_step
 from .dtm_kernels import unique_inverse

@@ -34,13 +34,13 @@ from typing import Any
 import numpy as np
 import torch
 
+from .._runtime.options import check_choice, check_integer
 from ..errors import ConfigError
 from ..features.descriptors import DESCRIPTOR_CHOICES
 from ..features.orientation import ORIENTATION_CHOICES
 from ..features.shape import SHAPE_METHODS
 from ..matching.blob import BlobConfig
 from ..matching.dtm import DTMConfig
-from ..options import check_choice, check_integer
 from ..types import Features, Keypoints, Matches
 
 CandidateFilter = Callable[[np.ndarray, np.ndarray], np.ndarray]

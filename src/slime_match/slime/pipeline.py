@@ -20,11 +20,11 @@ import numpy as np
 
 from .._runtime.cpus import available_cpus
 from .._runtime.forking import torch_threads
+from .._runtime.options import check_choice, check_integer
 from .._runtime.timing import StageTimer
 from ..geometry import ransac_kernels
 from ..geometry.frames import Frame, homographies_to_original
 from ..geometry.ransac import HomographyRansacConfig
-from ..options import check_choice, check_integer
 from ..pipelines import BasePipeline
 from .block_planes import block_planes
 from .blocks import Block, BlockConfig, make_blocks, make_tiles

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from slime_match.options import config_from_dict
+from slime_match._runtime.options import config_from_dict
 
 
 @dataclass

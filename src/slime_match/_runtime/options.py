@@ -17,7 +17,7 @@ import typing
 from dataclasses import fields, is_dataclass
 from typing import Any, TypeVar
 
-from .errors import ConfigError
+from ..errors import ConfigError
 
 T = TypeVar("T")
 
