@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from . import __version__
-from ._runtime import compile_notice, openmp
+from ._runtime import compiled, openmp
 from .errors import ConfigError, SlimeMatchError, caused_by_interrupt
 
 logger = logging.getLogger("slime_match")
@@ -381,7 +381,7 @@ def _check_output_folder(path: str | None) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     openmp.set_default_spin_count()  # before the subcommands load torch
-    compile_notice.install()
+    compiled.install_notice()
     parser = build_parser()
     args = parser.parse_args(argv)
     level = logging.DEBUG if args.debug else logging.INFO if getattr(args, "verbose", False) else logging.WARNING

@@ -11,7 +11,7 @@ import numpy as np
 import torch
 
 from . import __version__
-from ._runtime import compile_notice
+from ._runtime import compiled
 from ._runtime.timing import StageTimer
 from .config import MatchConfig, make_config
 from .errors import ConfigError, ImageError, caused_by_interrupt
@@ -55,7 +55,7 @@ class Matcher:
         """
         if not feature_cache_mb >= 0:  # NaN too
             raise ConfigError(f"feature_cache_mb must be >= 0 MiB, got {feature_cache_mb}")
-        compile_notice.install()  # a notice when a first run compiles the loops
+        compiled.install_notice()  # a notice when a first run compiles the loops
         self.config = copy.deepcopy(config or make_config()).validate()  # the caller's config is left as it is
         self.level_cache = LevelCache(int(feature_cache_mb * 2**20)) if feature_cache_mb > 0 else None
         self.device = resolve_device(self.config.device)

@@ -150,7 +150,7 @@ from numba.core.registry import CPUDispatcher
 from slime_match.features import extractor, patch_kernels
 from slime_match.pipelines import BaseConfig, make_base_pipeline
 kernels = {n: k for n, k in vars(patch_kernels).items() if isinstance(k, CPUDispatcher)}
-extractor.load_kernels()
+extractor.warm_up()
 loaded = {n: len(k.signatures) for n, k in kernels.items()}
 pipeline = make_base_pipeline(BaseConfig(shape="baumberg", orientation="gradient", descriptor="rootsift"))
 image = np.random.default_rng(0).uniform(0, 1, (96, 128, 3)).astype(np.float32)
@@ -160,8 +160,8 @@ print(loaded == {n: len(k.signatures) for n, k in kernels.items()}, sum(loaded.v
 """
 
 
-def test_load_kernels_loads_what_weight_free_extraction_calls():
-    """After ``extractor.load_kernels`` a real weight-free extraction compiles nothing more (forked workers
+def test_warm_up_loads_what_weight_free_extraction_calls():
+    """After ``extractor.warm_up`` a real weight-free extraction compiles nothing more (forked workers
     inherit every kernel)."""
     out = subprocess.run([sys.executable, "-c", _WARM_CHECK], capture_output=True, text=True, check=True)
     same, loaded = out.stdout.split()

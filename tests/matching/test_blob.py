@@ -164,7 +164,7 @@ import torch
 from numba.core.registry import CPUDispatcher
 from slime_match.matching import blob, nn_kernels
 kernels = {n: k for n, k in vars(nn_kernels).items() if isinstance(k, CPUDispatcher)}
-blob.load_kernels()
+blob.warm_up()
 loaded = {n: len(k.signatures) for n, k in kernels.items()}
 g = torch.Generator().manual_seed(1)
 d0, d1 = torch.rand(700, 128, generator=g), torch.rand(500, 128, generator=g)
@@ -173,8 +173,8 @@ print(loaded == {n: len(k.signatures) for n, k in kernels.items()}, sum(loaded.v
 """
 
 
-def test_load_kernels_loads_what_blob_matching_calls():
-    """After ``load_kernels`` a real Blob matching call compiles nothing more (forked workers inherit them)."""
+def test_warm_up_loads_what_blob_matching_calls():
+    """After ``warm_up`` a real Blob matching call compiles nothing more (forked workers inherit them)."""
     out = subprocess.run([sys.executable, "-c", _WARM_CHECK], capture_output=True, text=True, check=True)
     same, loaded = out.stdout.split()
     assert same == "True" and int(loaded) >= 5  # rows, columns, shortlist, greedy, first far

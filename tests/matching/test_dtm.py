@@ -195,7 +195,7 @@ from numba.core.registry import CPUDispatcher
 from slime_match.matching import delaunay, dtm, dtm_contraction_kernels, dtm_kernels
 kernels = {(m.__name__, n): k for m in (delaunay, dtm_kernels, dtm_contraction_kernels)
            for n, k in vars(m).items() if isinstance(k, CPUDispatcher)}
-dtm.load_kernels()
+dtm.warm_up()
 loaded = {n: len(k.signatures) for n, k in kernels.items()}
 g = np.random.default_rng(1)
 xy = np.rint(g.uniform(0, 300, (600, 2)))
@@ -207,8 +207,8 @@ print(loaded == {n: len(k.signatures) for n, k in kernels.items()}, sum(loaded.v
 """
 
 
-def test_load_kernels_loads_what_dtm_calls():
-    """After ``load_kernels`` a real DTM call compiles nothing more (forked workers inherit every kernel)."""
+def test_warm_up_loads_what_dtm_calls():
+    """After ``warm_up`` a real DTM call compiles nothing more (forked workers inherit every kernel)."""
     out = subprocess.run([sys.executable, "-c", _WARM_CHECK], capture_output=True, text=True, check=True)
     same, loaded = out.stdout.split()
     assert same == "True" and int(loaded) >= 8  # every kernel dtm.py calls

@@ -172,7 +172,7 @@ def keypoint_frames(keypoints: Keypoints, device: torch.device) -> torch.Tensor:
 
 
 @cache
-def load_kernels() -> None:
+def warm_up() -> None:
     """Load the compiled patch loops (``patch_kernels``: sampling, Baumberg moments, orientation and SIFT
     histograms) in this process, once, by running each on a few CPU patches (from numba's on-disk cache, or
     compiled on first use: a few seconds). Call it before forking workers that extract features on CPU, or

@@ -18,10 +18,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, types
+from numba import types
 from numba.extending import intrinsic
 
-_compiled = njit(cache=True, nogil=True, error_model="numpy")  # no ZeroDivisionError checks: loops vectorise
+from .._runtime.compiled import vector_kernel
 
 
 @intrinsic
@@ -31,7 +31,7 @@ def _fma(typingctx, a, b, c):
     return sig, lambda context, builder, signature, args: builder.fma(*args)
 
 
-@_compiled
+@vector_kernel
 def sample_patches(flat, offset, height, width, affine, level, unit):
     """Bilinear patches (``grid_sample``, align_corners=True, border padding) from a flattened pyramid.
 
@@ -95,7 +95,7 @@ _TAN_PI_8 = np.float32(math.tan(math.pi / 8))
 _PI, _HALF_PI, _QUARTER_PI = np.float32(math.pi), np.float32(math.pi / 2), np.float32(math.pi / 4)
 
 
-@_compiled
+@vector_kernel
 def _atan2(y, x):
     """float32 ``atan2(y, x)`` in (-pi, pi], branch-free (so that loops calling it vectorise); ~1 ulp."""
     ax, ay = abs(x), abs(y)
@@ -111,7 +111,7 @@ def _atan2(y, x):
     return -r if y < 0 else r
 
 
-@_compiled
+@vector_kernel
 def _replicate_pad(patch, out):
     """Copy a (P, P) patch into the centre of ``out`` (P + 2, P + 2) with its borders replicated."""
     p = patch.shape[0]
@@ -123,7 +123,7 @@ def _replicate_pad(patch, out):
         out[i, p + 1] = patch[r, p - 1]
 
 
-@_compiled
+@vector_kernel
 def _sobel(padded, gx, gy):
     """Normalised 3x3 Sobel gradients (sum of |weights| = 1) of a replicate-padded patch (P + 2, P + 2)
     into gx, gy (P * P,), in the operation order of the torch version."""
@@ -137,7 +137,7 @@ def _sobel(padded, gx, gy):
             gy[i * p + j] = (dy + two * (padded[i + 2, j + 1] - padded[i, j + 1])) * eighth
 
 
-@_compiled
+@vector_kernel
 def _central(padded, gx, gy):
     """Central differences / 2 of a replicate-padded patch (P + 2, P + 2) into gx, gy (P * P,)."""
     p = padded.shape[0] - 2
@@ -148,7 +148,7 @@ def _central(padded, gx, gy):
             gy[i * p + j] = (padded[i + 2, j + 1] - padded[i, j + 1]) * half
 
 
-@_compiled
+@vector_kernel
 def _votes(gx, gy, bins, eps, offset, b0, b1, w0, w1):
     """Linear votes of each gradient into its two nearest of ``bins`` orientation bins (kornia's binning).
 
@@ -179,7 +179,7 @@ def _votes(gx, gy, bins, eps, offset, b0, b1, w0, w1):
         b1[k] = 0 if i + 1 == bins else i + 1
 
 
-@_compiled
+@vector_kernel
 def _vote_buffers(m):
     """Scratch arrays of ``_votes`` for m pixels: gx, gy (float32), b0, b1 (int64), w0, w1 (float32).
 
@@ -190,7 +190,7 @@ def _vote_buffers(m):
     return np.empty(m, f32), np.empty(m, f32), np.empty(m, i64), np.empty(m, i64), np.empty(m, f32), np.empty(m, f32)
 
 
-@_compiled
+@vector_kernel
 def second_moments(patches, window):
     """Gaussian-weighted Sobel gradient second moments of patches.
 
@@ -222,7 +222,7 @@ def second_moments(patches, window):
     return out
 
 
-@_compiled
+@vector_kernel
 def orientation_histograms(patches, window, bins, eps, offset):
     """Window-weighted histograms of Sobel gradient directions with linear votes.
 
@@ -252,7 +252,7 @@ def orientation_histograms(patches, window, bins, eps, offset):
     return out
 
 
-@_compiled
+@vector_kernel
 def sift_histograms(patches, cell, weight, cells, bins, eps):
     """SIFT histograms: central-difference gradient votes pooled into spatial cells.
 

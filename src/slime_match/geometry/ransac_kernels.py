@@ -15,14 +15,13 @@ import math
 from functools import cache
 
 import numpy as np
-from numba import njit
 
 from slime_match.geometry.homography import _EPS
 
-_compiled = njit(cache=True, nogil=True)
+from .._runtime.compiled import kernel
 
 
-@_compiled
+@kernel
 def floyd_subsets(u, n):
     """(R, k) int64 Floyd k-subsets of ``range(n[r])`` (see ``sampling.sample_subsets_varying``), drawn from the
     (k, R) uniforms u in [0, 1): step i of row r takes ``t = floor(u[i, r] (j + 1))`` for ``j = n[r] - k + i``,
@@ -41,7 +40,7 @@ def floyd_subsets(u, n):
     return out
 
 
-@_compiled
+@kernel
 def far_samples(rows, start, index, t):
     """(R,) whether every two correspondences of sample r (rows ``start[r] + index[r]``) are farther than t
     pixels apart in both images."""
@@ -60,7 +59,7 @@ def far_samples(rows, start, index, t):
     return out
 
 
-@_compiled
+@kernel
 def _normalized(pts, col, out):
     """Hartley normalisation (as ``homography._normalization``) of the 4 points ``pts[:, col:col + 2]`` into
     out (4, 2): centroid at the origin, mean distance sqrt(2). Returns the centroid and the scale."""
@@ -77,7 +76,7 @@ def _normalized(pts, col, out):
     return cx, cy, scale
 
 
-@_compiled
+@kernel
 def _dlt_rows(p, q, a):
     """The (12, 9) DLT matrix a of ``q x (H p) = 0`` for (4, 2) normalised points p, q (the rows of
     ``homography._dlt_matrix``, grouped by kind): rows i, 4 + i, 8 + i of point i, the third being
@@ -94,7 +93,7 @@ def _dlt_rows(p, q, a):
             a[8 + i, 3 + c] = u * pc
 
 
-@_compiled
+@kernel
 def _dot(a, b, i, j, lo):
     """Sum over rows r >= lo of ``a[r, i] b[r, j]``."""
     s = 0.0
@@ -103,7 +102,7 @@ def _dot(a, b, i, j, lo):
     return s
 
 
-@_compiled
+@kernel
 def _null_vector(a, b, h):
     """Unit null vector h (9,) of the first 8 rows of a (12, 9), of rank 8: the last column of Q in the
     Householder QR of their transpose. b (9, 9) is overwritten: rows j.. of column j with the reflector ``v_j``
@@ -133,7 +132,7 @@ def _null_vector(a, b, h):
             h[r] -= f * b[r, j]
 
 
-@_compiled
+@kernel
 def _second_singular_at_least(a, h, t, m):
     """Whether the second smallest singular value of a (12, 9), whose smallest is 0 with unit singular vector h,
     is >= t: the Cholesky factorisation of ``a^T a + (1 + t^2) h h^T - t^2 I`` (m (9, 9) its workspace) succeeds."""
@@ -159,7 +158,7 @@ def _second_singular_at_least(a, h, t, m):
     return True
 
 
-@_compiled
+@kernel
 def minimal_homographies(rows, start, index, degeneracy):
     """Normalised DLT of each 4-point sample r (rows ``start[r] + index[r]``).
 
@@ -200,7 +199,7 @@ def minimal_homographies(rows, start, index, degeneracy):
     return hom, ok
 
 
-@_compiled
+@kernel
 def _inlier(h, g, side, x0, y0, x1, y1, t2):
     """Whether (x0, y0) -> (x1, y1) is an inlier of h with adjugate g: two-sided error below sqrt(t2), and
     ``side * w > 0`` for ``w`` the third coordinate of ``H [x0; 1]``. Without divisions nor square roots:
@@ -220,7 +219,7 @@ def _inlier(h, g, side, x0, y0, x1, y1, t2):
     return ex * ex + ey * ey < t2 * w * w and w != 0
 
 
-@_compiled
+@kernel
 def _adjugate(h, g):
     """g (3, 3) = adjugate of h (3, 3), an inverse up to scale: column i is ``h[i + 1] x h[i + 2]`` (rows mod 3)."""
     for i in range(3):
@@ -230,7 +229,7 @@ def _adjugate(h, g):
         g[2, i] = a[0] * b[1] - a[1] * b[0]
 
 
-@_compiled
+@kernel
 def inlier_counts(h, side, rows, start, n, t):
     """(M,) int64 inliers (see ``_inlier``, t in pixels) of each homography h[m] (M, 3, 3) with side[m] (M,) among
     its n[m] rows from start[m]."""
@@ -243,7 +242,7 @@ def inlier_counts(h, side, rows, start, n, t):
     return out
 
 
-@_compiled
+@kernel
 def inlier_mask(h, side, rows, t):
     """(K,) bool inliers (see ``_inlier``, t in pixels) of one homography h (3, 3) with side +1/-1 among rows."""
     out = np.empty(len(rows), np.bool_)
@@ -255,7 +254,7 @@ def inlier_mask(h, side, rows, t):
 
 
 @cache
-def load_kernels() -> None:
+def warm_up() -> None:
     """Load these compiled loops in this process, once (from numba's on-disk cache, or compiled on first use: a
     few seconds), with the argument types the RANSACs pass. Call it before forking workers that run RANSACs, or
     each of them pays it."""

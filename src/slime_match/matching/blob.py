@@ -121,7 +121,7 @@ def blob_match(desc0: torch.Tensor, desc1: torch.Tensor, xy0: torch.Tensor, xy1:
 
 
 @cache
-def load_kernels() -> None:
+def warm_up() -> None:
     """Load Blob matching's compiled loops (``nn_kernels``) in this process, once: from numba's on-disk cache,
     or compiled on first use (a few seconds). Call it before forking workers that run Blob matching, or each
     of them pays it."""

@@ -15,23 +15,23 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-_compiled = njit(cache=True, nogil=True)
+from .._runtime.compiled import kernel
+
 _NEXT = np.array([1, 2, 0])  # corner k + 1 and k + 2, mod 3
 _PREV = np.array([2, 0, 1])
 
 MAX_SIDE = 20_000  # px; in-circle terms stay below 2^62 for coordinate differences up to this
 
 
-@_compiled
+@kernel
 def _orient(p, a, b, c):
     """Twice the signed area of the points a, b, c of p (P, 2) int64 (> 0: counter-clockwise in x-right,
     y-up axes, i.e. a positive cross product)."""
     return (p[b, 0] - p[a, 0]) * (p[c, 1] - p[a, 1]) - (p[b, 1] - p[a, 1]) * (p[c, 0] - p[a, 0])
 
 
-@_compiled
+@kernel
 def _in_circle(p, a, b, c, d):
     """> 0 when point d lies strictly inside the circumcircle of the positively oriented triangle a, b, c."""
     adx, ady = p[a, 0] - p[d, 0], p[a, 1] - p[d, 1]
@@ -41,7 +41,7 @@ def _in_circle(p, a, b, c, d):
             + (cdx * cdx + cdy * cdy) * (adx * bdy - bdx * ady))
 
 
-@_compiled
+@kernel
 def _relink(nbr, t, old, new):
     """Triangle t (if any) now borders ``new`` where it bordered ``old``."""
     if t >= 0:
@@ -50,13 +50,13 @@ def _relink(nbr, t, old, new):
                 nbr[t, k] = new
 
 
-@_compiled
+@kernel
 def _set(tri, nbr, t, a, b, c, na, nb, nc):
     tri[t, 0], tri[t, 1], tri[t, 2] = a, b, c
     nbr[t, 0], nbr[t, 1], nbr[t, 2] = na, nb, nc
 
 
-@_compiled
+@kernel
 def _legalize(p, tri, nbr, stack, top):
     """Flip, until none is left, the stacked edges (triangle, corner at the new point) that fail the
     empty-circle test; each flip stacks the two edges it exposes."""
@@ -85,7 +85,7 @@ def _legalize(p, tri, nbr, stack, top):
         top += 2
 
 
-@_compiled
+@kernel
 def insertion_order(ip, y0, strip):
     """(P,) order of integer points ip (P, 2) along a snake of horizontal strips ``strip`` px high from y0:
     strips top to bottom, x ascending in even strips and descending in odd ones, ties by index."""
@@ -99,7 +99,7 @@ def insertion_order(ip, y0, strip):
     return np.argsort(key, kind="mergesort")
 
 
-@_compiled
+@kernel
 def triangulate(points):
     """Delaunay triangles of unique integer points whose bounding rectangle's corners are among them.
 

@@ -123,12 +123,12 @@ def dtm_filter(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0: tupl
     Returns:
         DTMResult with per-candidate keep flags, removal iterations and restoration flags.
     """
-    load_kernels()
+    warm_up()
     return _filter(xy0, xy1, scores, size0, size1, unmatched0, unmatched1, config)
 
 
 @cache
-def load_kernels() -> None:
+def warm_up() -> None:
     """Load DTM's compiled loops (``dtm_kernels``, ``dtm_contraction_kernels``) in this process, once: about 0.4 s from numba's on-disk
     cache, about 13 s on a 2-core CPU the first time they are compiled. Call it before forking workers that
     run DTM, or each of them pays it."""

@@ -8,14 +8,13 @@ points; each point's Delaunay neighbours are a CSR list ``first``, ``degree``, `
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
-_compiled = njit(cache=True, nogil=True)
+from .._runtime.compiled import kernel
 
 NEAR, APART, FAR = 0, 1, 2  # relations of two kept mesh points, see ``relation``
 
 
-@_compiled
+@kernel
 def relation(p, q, first, degree, adjacent, mark):
     """NEAR: kept mesh points p and q are one point or Delaunay neighbours; FAR: they are more than two
     Delaunay edges apart (paths through border points included); APART otherwise.
@@ -37,7 +36,7 @@ def relation(p, q, first, degree, adjacent, mark):
     return FAR
 
 
-@_compiled
+@kernel
 def near_unit_pairs(members, start, edges):
     """Unit pairs (a, b) near in one image: on one kept vertex (each pair once, a < b) or on the two ends of
     a mesh edge.
@@ -71,7 +70,7 @@ def near_unit_pairs(members, start, edges):
     return a, b
 
 
-@_compiled
+@kernel
 def survivors(a, b, order, n_units):
     """Units surviving the walk in ``order`` (the units taking part, best first) where each surviving unit
     removes its inconsistent neighbours: (n_units,) bool.
@@ -102,7 +101,7 @@ def survivors(a, b, order, n_units):
     return survive
 
 
-@_compiled
+@kernel
 def _classified_pairs(by_vertex, alive, point, n, edges, other, first, degree, adjacent):
     """The near unit pairs a, b (N,) of one image and their relation (N,) in the other image, whose mesh
     points of the units are ``other`` and whose adjacency is first, degree, adjacent."""
@@ -118,7 +117,7 @@ def _classified_pairs(by_vertex, alive, point, n, edges, other, first, degree, a
     return a, b, kind
 
 
-@_compiled
+@kernel
 def contraction_step(alive, by_score, point0, point1, by_vertex0, by_vertex1, edges0, edges1, n0, n1,
                      first0, degree0, adjacent0, first1, degree1, adjacent1):
     """The units one contraction iteration removes: (U,) bool.

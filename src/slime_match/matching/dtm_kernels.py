@@ -14,14 +14,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from .._runtime.compiled import kernel
 from .delaunay import triangulate
 
-_compiled = njit(cache=True, nogil=True)
 
-
-@_compiled
+@kernel
 def unique_inverse(keys):
     """``np.unique(keys, return_inverse=True)`` of int64 keys (K,): the distinct keys ascending (V,) and the
     index of each key among them (K,)."""
@@ -37,7 +35,7 @@ def unique_inverse(keys):
     return distinct[:m + 1], inverse
 
 
-@_compiled
+@kernel
 def grid_vertices(xy, w, h):
     """Positions xy (K, 2) rounded (half to even), clipped to the w x h pixel grid and merged: (V, 2) float64
     the distinct ones by row then column, (K,) the one of each position."""
@@ -53,7 +51,7 @@ def grid_vertices(xy, w, h):
     return out, inverse
 
 
-@_compiled
+@kernel
 def carved_mesh(points, n, free):
     """A mesh in one pass: the Delaunay triangulation (``delaunay.triangulate``) of points and of the free
     points that share a triangle with a border point in the triangulation of everything (they carve the
@@ -79,7 +77,7 @@ def carved_mesh(points, n, free):
     return points, simplices, neighbors, first, degree, adjacent, edges, error or final_error
 
 
-@_compiled
+@kernel
 def ring_carved(simplices, n, first_free, n_free):
     """(n_free,) whether each free point (indices first_free...) shares a triangle with a ring point
     (indices n to first_free - 1)."""
@@ -95,7 +93,7 @@ def ring_carved(simplices, n, first_free, n_free):
     return out
 
 
-@_compiled
+@kernel
 def mesh_tables(simplices, n_pts, n):
     """The neighbour tables of a triangulation of n_pts points.
 
@@ -133,7 +131,7 @@ def mesh_tables(simplices, n_pts, n):
     return first, degree, adjacent, edges
 
 
-@_compiled
+@kernel
 def walk_tables(points, simplices, neighbors):
     """Tables of ``locate`` and ``transfer_test``, with an extra triangle T standing for the outside.
 
@@ -167,7 +165,7 @@ def walk_tables(points, simplices, neighbors):
     return lines, across, start, proper
 
 
-@_compiled
+@kernel
 def nearest_point(points, n, q):
     """The point among the first n of points (P, 2) nearest each query q (Q, 2): (Q,) its index and (Q,)
     whether another of them is exactly as near (exact on integer-valued positions)."""
@@ -185,7 +183,7 @@ def nearest_point(points, n, q):
     return nearest, tied
 
 
-@_compiled
+@kernel
 def locate(lines, across, start, q, near):
     """(Q,) index of the triangle containing each query point q (Q, 2), -1 outside the hull.
 
@@ -211,7 +209,7 @@ def locate(lines, across, start, q, near):
     return out
 
 
-@_compiled
+@kernel
 def transfer_test(points, simplices, proper, n, simplex, nearest, dst_v, affine, offset, q_dst, tol):
     """Whether each q_dst lies in the image of the triangle ``simplex`` that contains its source point.
 
@@ -254,7 +252,7 @@ def transfer_test(points, simplices, proper, n, simplex, nearest, dst_v, affine,
     return out
 
 
-@_compiled
+@kernel
 def _solve3(m, r):
     """Solve the 3 x 3 system m x = r (r: (3, 2)) by Gaussian elimination with partial pivoting (m and r are
     overwritten); returns x (3, 2)."""
@@ -283,7 +281,7 @@ def _solve3(m, r):
     return x
 
 
-@_compiled
+@kernel
 def local_affine(src, edges, dst, ridge):
     """Affine maps dst ~ c + A (x - src[v]) fitted over each kept vertex's closed Delaunay neighbourhood by
     least squares, ridge-regularised toward the global affine fit: ``ridge`` (px^2) is added to the normal

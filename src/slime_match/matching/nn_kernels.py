@@ -14,19 +14,19 @@ as the bounded numpy search these kernels replace did (see ``_few_clean_groups``
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
-_compiled = njit(cache=True, nogil=True)
+from .._runtime.compiled import kernel
+
 _CHUNK = 16  # entries tested at once against a bound
 
 
-@_compiled
+@kernel
 def _less(x, y):
     """x before y in ascending order with NaN last."""
     return x < y or (np.isnan(y) and not np.isnan(x))
 
 
-@_compiled
+@kernel
 def _take(vals, idx, r, filled, x, j):
     """Offer value x of index j to the ascending list vals[r] (k,), idx[r] (k,) holding ``filled`` entries:
     inserted after the entries equal to it, the last entry dropping out when the list is full. Returns the
@@ -48,7 +48,7 @@ def _take(vals, idx, r, filled, x, j):
     return filled
 
 
-@_compiled
+@kernel
 def _kth_smallest(low, k):
     """The k-th smallest non-NaN value of low (G,), NaN when there are fewer than k."""
     out = np.float32(np.nan)  # float32 unless low is float64
@@ -62,7 +62,7 @@ def _kth_smallest(low, k):
     return out
 
 
-@_compiled
+@kernel
 def _few_clean_groups(line, k):
     """Whether a line (L,) with L > 8k has fewer than k NaN-free groups of the entries equal mod 8k: where the
     former search's bound (the k-th smallest group minimum) was NaN and torch.topk answered."""
@@ -79,7 +79,7 @@ def _few_clean_groups(line, k):
     return clean < k
 
 
-@_compiled
+@kernel
 def smallest_rows(d, k):
     """The k <= M smallest entries of each row of d (B, M), ascending: values (B, k), column indices (B, k) and
     False where torch.topk must answer instead (rows with NaN entries, see ``_few_clean_groups``).
@@ -122,7 +122,7 @@ def smallest_rows(d, k):
     return vals, idx, True
 
 
-@_compiled
+@kernel
 def smallest_cols(d, k):
     """``smallest_rows`` of d.T without transposing: the k <= B smallest entries of each column of d (B, M),
     ascending, with per-column bounds (over the rows equal mod 2k) and lists filled in passes over the rows:
@@ -173,7 +173,7 @@ def smallest_cols(d, k):
     return vals, idx, True
 
 
-@_compiled
+@kernel
 def shortlist(row_dist, row_idx, col_idx):
     """Blob matching's shortlist: the pairs (i, j = row_idx[i, r]) with i in col_idx[j], in row-major order.
 
@@ -199,7 +199,7 @@ def shortlist(row_dist, row_idx, col_idx):
     return i[:p], j[:p], v[:p]
 
 
-@_compiled
+@kernel
 def greedy_accept(rows, cols, order, max_per):
     """(P,) bool: walk the pairs (rows[q], cols[q]) (P,) in ``order`` (P,) and accept each while its row and
     its column hold fewer than ``max_per`` accepted pairs."""
@@ -218,7 +218,7 @@ def greedy_accept(rows, cols, order, max_per):
     return accepted
 
 
-@_compiled
+@kernel
 def first_far(nn_dist, nn_idx, rows, xy, anchor, r2):
     """Distance to the first entry of ascending k-NN lists located farther than sqrt(r2) from an anchor.
 

@@ -20,7 +20,7 @@ Slime also calls these hooks; each has a default built on the part above where o
 * ``detect_keypoints(image)`` and ``describe_keypoints(context, keypoints)``: the detector and the
   description apart, for Slime's "merged" detection (``slime_detection = "merged"`` requires them);
 * ``describe_batch()``: None (a feature set is described whole); ``own_frames_upright()``: False;
-  ``load_kernels()``: nothing to load; ``describe()``: no parameters to report.
+  ``kernel_groups()``: no compiled loops to load before forking; ``describe()``: no parameters to report.
 
 :func:`unimplemented` lists what a class still lacks; ``register_pipeline`` refuses such a class.
 """
@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from .._runtime.compiled import warm_up
 from .._runtime.options import check_choice, check_integer
 from ..errors import ConfigError
 from ..features.descriptors import DESCRIPTOR_CHOICES
@@ -185,9 +186,17 @@ class BasePipeline:
         ``detect`` and ``describe_keypoints`` gave the features (an upright pipeline's own orientation)."""
         return False
 
+    def kernel_groups(self) -> tuple[str, ...]:
+        """The groups of compiled loops (``_runtime.compiled.GROUPS``) this pipeline's calls run on the CPU
+        (none by default)."""
+        return ()
+
     def load_kernels(self) -> None:
-        """Load the compiled loops that this pipeline's calls run on CPU, in this process (none by default).
-        Call it before forking workers that run the pipeline, or each of them loads them again."""
+        """Load the compiled loops of ``kernel_groups`` in this process. Call it before forking workers that
+        run the pipeline, or each of them loads them again."""
+        groups = self.kernel_groups()
+        if groups:
+            warm_up(*groups)
 
     def describe(self) -> dict[str, Any]:
         """Parameters actually used (for the output summary)."""

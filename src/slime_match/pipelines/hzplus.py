@@ -11,11 +11,9 @@ import numpy as np
 import torch
 
 from ..features.extractor import LocalFeatureExtractor, PatchConfig
-from ..features.extractor import load_kernels as load_patch_kernels
 from ..features.harrisz import HarrisZConfig, detect_harrisz
 from ..features.laf import PatchPyramid
 from ..io import to_tensor
-from ..matching import blob, dtm
 from ..matching.blob import blob_match
 from ..matching.dtm import dtm_filter
 from ..types import Features, Keypoints, Matches
@@ -94,11 +92,8 @@ class HzPlusPipeline(BasePipeline):
                           config=self.config.dtm).keep
         return candidates.subset(keep)
 
-    def load_kernels(self) -> None:
-        if self.device.type == "cpu":
-            load_patch_kernels()
-        blob.load_kernels()
-        dtm.load_kernels()
+    def kernel_groups(self) -> tuple[str, ...]:
+        return ("patches", "blob", "dtm") if self.device.type == "cpu" else ("blob", "dtm")
 
     def describe(self) -> dict[str, Any]:
         return {"base": "hz+", "detector": "harrisz+", **dataclasses.asdict(self.harrisz),

@@ -12,7 +12,6 @@ import torch
 
 from ..errors import ConfigError
 from ..features.extractor import LocalFeatureExtractor, PatchConfig
-from ..features.extractor import load_kernels as load_patch_kernels
 from ..features.laf import PatchPyramid
 from ..types import Features, Matches
 from .base import BaseConfig, BasePipeline, _empty_features, _filtered
@@ -106,9 +105,8 @@ class KeyNetPipeline(BasePipeline):
     def own_frames_upright(self) -> bool:
         return self.patch.orientation == "upright"  # as for Hz+
 
-    def load_kernels(self) -> None:
-        if self.device.type == "cpu":
-            load_patch_kernels()
+    def kernel_groups(self) -> tuple[str, ...]:
+        return ("patches",) if self.device.type == "cpu" else ()
 
     @torch.inference_mode()
     def match(self, features0, features1, size0, size1, candidate_filter=None) -> Matches:

@@ -10,7 +10,6 @@ import cv2
 import numpy as np
 import torch
 
-from ..matching import blob
 from ..matching.nn import match_fginn
 from ..types import Features, Matches
 from .base import BaseConfig, BasePipeline, _empty_features, _filtered
@@ -90,8 +89,8 @@ class RootSiftPipeline(BasePipeline):
                               ratio=self.config.fginn_ratio, spatial_radius=self.config.fginn_radius)
         return _filtered(matches, features0, features1, candidate_filter)
 
-    def load_kernels(self) -> None:
-        blob.load_kernels()  # FGINN runs the nearest-neighbour loops of Blob matching
+    def kernel_groups(self) -> tuple[str, ...]:
+        return ("blob",)  # FGINN runs the nearest-neighbour loops of Blob matching
 
     def describe(self) -> dict[str, Any]:
         return {"base": "rootsift", "detector": "opencv-dog", "descriptor": "rootsift", "matcher": "fginn",

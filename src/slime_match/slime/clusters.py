@@ -5,9 +5,8 @@ of its seven calls."""
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
-_compiled = njit(cache=True, nogil=True)
+from .._runtime.compiled import kernel
 
 
 def greedy_clusters(points: np.ndarray, scores: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
@@ -28,7 +27,7 @@ def greedy_clusters(points: np.ndarray, scores: np.ndarray, radius: float) -> tu
     return _greedy_cover(np.argsort(scores, kind="stable"), first, neighbours)
 
 
-@_compiled
+@kernel
 def _neighbour_lists(points, radius):
     """The other points within ``radius`` of each point (Chebyshev distance), found by a sweep along the first
     coordinate: point i's are ``neighbours[first[i]:first[i + 1]]`` ((K + 1,) and (2 * pairs,) int64)."""
@@ -64,7 +63,7 @@ def _neighbour_lists(points, radius):
     return first, neighbours
 
 
-@_compiled
+@kernel
 def _greedy_cover(order, first, neighbours):
     """``greedy_clusters`` on the neighbour lists of ``_neighbour_lists``, visiting the points in ``order``."""
     cluster = np.full(len(order), -1, np.int64)

@@ -7,10 +7,10 @@ matrices against tens of thousands of matches. Each test is a few products; in t
 
 from __future__ import annotations
 
-from numba import njit
+from .._runtime.compiled import kernel
 
 
-@njit(cache=True, nogil=True)
+@kernel
 def epipolar_votes(f, x0, x1, tol2, votes):
     """Add to ``votes`` the number of fundamental matrices each match is consistent with.
 

@@ -18,11 +18,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._runtime.compiled import warm_up
 from .._runtime.cpus import available_cpus
 from .._runtime.forking import torch_threads
 from .._runtime.options import check_choice, check_integer
 from .._runtime.timing import StageTimer
-from ..geometry import ransac_kernels
 from ..geometry.frames import Frame, homographies_to_original
 from ..geometry.ransac import HomographyRansacConfig
 from ..pipelines import BasePipeline
@@ -167,7 +167,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
             warn(message)
     if workers > 1:  # loaded once here, the forked workers of every stage inherit the compiled loops
         pipeline.load_kernels()
-        ransac_kernels.load_kernels()
+        warm_up("ransac")
     with timer("features"):  # the tiles' regions too (Sec. 3.8), so that all detections share the workers
         detection = config.detection or pipeline.slime_detection
         requests = [LevelRequest(image0, layout.blocks0, detection=detection),

@@ -11,20 +11,20 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-_compiled = njit(cache=True, nogil=True, error_model="numpy")
+from .._runtime.compiled import vector_kernel
+
 _STEPS = ((0, 1.0), (1, 1.0), (0, -1.0), (1, -1.0))  # neighbour n = x + sign e_j, in that order
 _STEP_ANGLES = (0.0, math.pi / 2, math.pi, -math.pi / 2)  # the angle of n - x
 
 
-@_compiled
+@vector_kernel
 def _wrap(a):
     """Angle wrapped to (-pi, pi] (the same formula as ``planes.wrap_angle``)."""
     return math.pi - np.mod(math.pi - a, 2.0 * math.pi)
 
 
-@_compiled
+@vector_kernel
 def _local_ok(h, x, y, p0, p1, p2, rho, psi, inverse, t_theta, t_sigma):
     """Orientation and scale tests at the 4 neighbours of (x, y) under the (9,) homography h, with
     H [x, y, 1] = (p0, p1, p2): (some |wrap(rho - rho^H_n)| < t_theta, some psi^H_n / psi in [1/t, t]),
@@ -46,7 +46,7 @@ def _local_ok(h, x, y, p0, p1, p2, rho, psi, inverse, t_theta, t_sigma):
     return rot, scale
 
 
-@_compiled
+@vector_kernel
 def expansion_pairs(h, hinv, side, xy0, xy1, rho, psi, t_perp, t_theta, t_sigma):
     """The (plane, match) pairs passing all tests of Sec. 3.4 (see ``planes.expand_planes``).
 

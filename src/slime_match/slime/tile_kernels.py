@@ -11,10 +11,11 @@ plane, group of sets or selected set is handled on its own in one pass.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from .._runtime.compiled import kernel
 
 
-@njit(cache=True, nogil=True)
+@kernel
 def greedy_cover(indptr, indices, weights, group_start, group_sets, q):
     """The coverage-greedy picks of every group of sets.
 
@@ -59,7 +60,7 @@ def greedy_cover(indptr, indices, weights, group_start, group_sets, q):
     return np.sort(picked[:n_picked])
 
 
-@njit(cache=True, nogil=True)
+@kernel
 def tile_pair_sets(plane_indptr, plane_indices, tiles0_indptr, tiles0_indices, tiles1_indptr, tiles1_indices,
                    n_tiles0, n_tiles1):
     """Every non-empty set {m in P_l : x_m in tile c, x'_m in tile c'}, sorted by (l, c, c').
@@ -112,7 +113,7 @@ def tile_pair_sets(plane_indptr, plane_indices, tiles0_indptr, tiles0_indices, t
             indptr[:n_sets + 1].copy(), indices)
 
 
-@njit(cache=True, nogil=True)
+@kernel
 def fused_sets(sel_indptr, sel_indices, sel_key, pool_indptr, pool_indices, pool_key, weights, t_ov):
     """Sec. 3.7's fusion: each selected set united with the pool sets of its tile pair that overlap it.
 
