@@ -63,7 +63,11 @@ def test_missing_or_odd_cgroup_files_mean_no_quota(tmp_path):
     assert cgroup_cpu_quota(tmp_path, "not a cgroup line\n") is None
 
 
-@pytest.mark.parametrize("workers", [0, -2, 1.5, "2"])
+@pytest.mark.parametrize("workers", [0, -2, 1.5, "two"])
 def test_bad_worker_counts_are_config_errors(workers):
     with pytest.raises(ConfigError, match="workers"):
         make_config("slime", workers=workers)
+
+
+def test_a_worker_count_given_as_text_is_read_as_a_number():
+    assert make_config("slime", workers="2").slime.workers == 2  # as --set slime.workers=2 reads it
