@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from slime_match.cli import parse_scales
+from slime_match.cli.match_options import parse_scales
 from slime_match.config import make_config
 from slime_match.eval.datasets import load_dataset, rotated_pair
 from slime_match.eval.methods import parse_method_spec

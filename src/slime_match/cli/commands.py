@@ -1,4 +1,4 @@
-"""Command line: ``slime match``, ``slime pairs``, ``slime make-pairs``, ``slime demo``, ``slime viz``,
+"""The commands: ``slime match``, ``slime pairs``, ``slime make-pairs``, ``slime demo``, ``slime viz``,
 ``slime colmap``, ``slime hloc`` (and ``slime bench`` from slime_match.eval)."""
 
 from __future__ import annotations
@@ -8,126 +8,12 @@ import logging
 import sys
 from pathlib import Path
 
-from . import __version__
-from ._runtime import compiled, openmp
-from .errors import ConfigError, SlimeMatchError, caused_by_interrupt
+from .. import __version__
+from .._runtime import compiled, openmp
+from ..errors import ConfigError, SlimeMatchError, caused_by_interrupt
+from .match_options import add_match_options, add_workers_option, config_of, positive_int
 
 logger = logging.getLogger("slime_match")
-
-
-def _add_match_options(parser: argparse.ArgumentParser) -> None:
-    from .config import DEVICES, methods
-    from .features.descriptors import DESCRIPTOR_CHOICES
-    from .features.orientation import ORIENTATION_CHOICES
-    from .features.shape import SHAPE_METHODS
-    from .geometry.backends import RANSAC_CHOICES
-    from .pipelines import base_names
-    from .slime.levels import DETECTIONS
-    from .slime.refine import TILE_TESTS
-
-    parser.add_argument("--method", default=None, choices=methods(),
-                        help="Slime (default) or a base pipeline alone")
-    parser.add_argument("--base", default=None, choices=base_names(),
-                        help="base pipeline run inside Slime (default hz+)")
-    parser.add_argument("--descriptor", default=None, choices=DESCRIPTOR_CHOICES,
-                        help="Hz+ / Key.Net descriptor; auto = HardNet when its weights are available, else "
-                             "RootSIFT (Key.Net: TFeat)")
-    parser.add_argument("--shape", default=None, choices=SHAPE_METHODS, help="Hz+ affine shape")
-    parser.add_argument("--orientation", default=None, choices=ORIENTATION_CHOICES,
-                        help="Hz+ patch orientation")
-    parser.add_argument("--upright", action="store_true", default=None,
-                        help="no orientation estimation (the paper's upright variants)")
-    parser.add_argument("--ransac", default=None, choices=RANSAC_CHOICES, help="post-processing RANSAC (default none)")
-    parser.add_argument("--threshold", type=float, default=None,
-                        help="inlier threshold in px of the --ransac post-processing (default 3)")
-    parser.add_argument("--seed", type=int, default=None, help="random seed (RANSAC sampling; default 0)")
-    parser.add_argument("--device", default=None, choices=DEVICES, help="default auto: CUDA when available")
-    parser.add_argument("--weights-dir", default=None, help="folder with model weights (else TORCH_HOME cache)")
-    parser.add_argument("-v", "--verbose", action="store_true",
-                        help="log each stage as it finishes (seconds) and Slime's block and tile layout")
-    parser.add_argument("--max-side", type=int, default=None, metavar="PX",
-                        help="shrink images whose longest side is larger to this many px before matching "
-                             "(matches come back in original pixels); faster and lighter on large photos")
-    parser.add_argument("--magnification", type=float, default=None,
-                        help="patch size over the detected region (default 6 over HarrisZ+ ellipses, 1 over "
-                             "Key.Net frames); smaller patches give a weaker base (docs/coverage.md)")
-    parser.add_argument("--scales", type=parse_scales, default=None,
-                        help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper; "
-                             "1,2 is about 2.5x faster, 1,2,3,4 covers more at about 2.5x the time; see the README)")
-    parser.add_argument("--detection", default=None, choices=DETECTIONS,
-                        help="Slime: how blocks get keypoints: 'merged' (the hz+ default) detects every block "
-                             "crop on its own and describes shared keypoints once, 'block' also describes per "
-                             "crop (the paper's prototype, slower), 'scale' detects once per block scale "
-                             "(fastest, the RootSIFT and Key.Net default; fewer matches in low-texture scenes)")
-    parser.add_argument("--tile-test", default=None, choices=TILE_TESTS,
-                        help="Slime: which full-resolution tile matches to keep: 'flow' (the paper's default: "
-                             "near a match of the selected planes), 'plane' (fits the plane's homography over "
-                             "the whole tile pair: more coverage, docs/coverage.md)")
-    parser.add_argument("--set", dest="settings", action="append", default=[], type=parse_setting,
-                        metavar="OPTION=VALUE",
-                        help="any option by its dotted path, e.g. slime.tiles.t_xi=12 or base.blob.shortlist_k=5 "
-                             "(repeatable; every path is in a run's summary.json, under config)")
-    parser.add_argument("--config", default=None, metavar="SUMMARY.json",
-                        help="start from the configuration a run recorded (its summary.json) instead of the "
-                             "method's preset; the options given here change it")
-
-
-def _add_workers_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--workers", dest="slime_workers", type=positive_int, default=None, metavar="N",
-                        help="processes for Slime's parallel steps (default: one per CPU this process may use, "
-                             "its affinity mask and cgroup quota; 1: no forks); the matches do not depend on it")
-
-
-def positive_int(text: str) -> int:
-    """An integer >= 1 (an argparse type: anything else raises ArgumentTypeError)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected at least 1, got {value}")
-    return value
-
-
-def parse_scales(text: str) -> tuple[int, ...]:
-    """Slime block scales from ``"1,2,3"`` (an argparse type: bad text raises ArgumentTypeError)."""
-    try:
-        scales = tuple(int(part) for part in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"scales must be comma-separated integers, got {text!r}") from None
-    if not scales or min(scales) < 1:
-        raise argparse.ArgumentTypeError(f"scales must be positive block counts, got {text!r}")
-    return scales
-
-
-def parse_setting(text: str) -> tuple[str, str]:
-    """``OPTION=VALUE`` of ``--set`` (an argparse type: text without '=' raises ArgumentTypeError)."""
-    path, sep, value = text.partition("=")
-    if not sep or not path.strip():
-        raise argparse.ArgumentTypeError(f"expected OPTION=VALUE (e.g. slime.tiles.t_xi=12), got {text!r}")
-    return path.strip(), value.strip()
-
-
-def _options(args: argparse.Namespace) -> dict:
-    keys = ("method", "base", "descriptor", "shape", "orientation", "upright", "ransac", "threshold", "seed", "device",
-            "weights_dir", "magnification", "scales", "detection", "tile_test", "max_side")
-    return {key: getattr(args, key) for key in keys} | {"workers": getattr(args, "slime_workers", None)}
-
-
-def _config(args: argparse.Namespace):
-    from .config import MatchConfig, make_config, with_options
-
-    options = _options(args) | dict(args.settings)
-    if args.config:
-        config = with_options(MatchConfig.load(args.config), **options)
-    else:
-        config = make_config(options.pop("method") or "slime", **options)
-    if getattr(args, "save_stages", False):
-        if config.method != "slime":
-            raise ConfigError(f"--save-stages writes Slime's stages, but --method {config.method} runs the "
-                              "base pipeline alone")
-        config.slime.keep_stages = True
-    return config
 
 
 def _report(result, out: Path) -> None:
@@ -139,11 +25,11 @@ def _report(result, out: Path) -> None:
 
 
 def cmd_match(args: argparse.Namespace) -> int:
-    from .io import load_image
-    from .matcher import Matcher
-    from .runs.outputs import write_pair_outputs
+    from ..io import load_image
+    from ..matcher import Matcher
+    from ..runs.outputs import write_pair_outputs
 
-    config = _config(args)
+    config = config_of(args)
     image0, image1 = load_image(args.image0), load_image(args.image1)  # bad input fails before model loading
     result = Matcher(config)(image0, image1)
     out = Path(args.output)
@@ -153,12 +39,12 @@ def cmd_match(args: argparse.Namespace) -> int:
 
 
 def cmd_pairs(args: argparse.Namespace) -> int:
-    from .matcher import FEATURE_CACHE_MB
-    from .runs.batch import INDEX_FILE, match_pairs, read_pairs
+    from ..matcher import FEATURE_CACHE_MB
+    from ..runs.batch import INDEX_FILE, match_pairs, read_pairs
 
     jobs = read_pairs(args.pairs, args.images)  # a bad pairs file or a missing image fails before any work
     cache_mb = FEATURE_CACHE_MB if args.feature_cache_mb is None else args.feature_cache_mb
-    records = match_pairs(_config(args), jobs, args.output, workers=args.workers, overwrite=args.overwrite,
+    records = match_pairs(config_of(args), jobs, args.output, workers=args.workers, overwrite=args.overwrite,
                           plot=args.plot, feature_cache_mb=cache_mb)
     count = {status: sum(r["status"] == status for r in records) for status in ("done", "skipped", "failed")}
     print(f"{len(records)} pairs: {count['done']} matched, {count['skipped']} already done, "
@@ -172,7 +58,7 @@ def cmd_pairs(args: argparse.Namespace) -> int:
 
 
 def cmd_make_pairs(args: argparse.Namespace) -> int:
-    from .runs.pair_lists import make_pairs, write_pairs
+    from ..runs.pair_lists import make_pairs, write_pairs
 
     path = Path(args.pairs_file)
     _check_output_folder(str(path.parent))
@@ -195,9 +81,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     import numpy as np
     from skimage.data import stereo_motorcycle
 
-    from .eval.metrics import disparity_error
-    from .matcher import Matcher
-    from .runs.outputs import write_pair_outputs
+    from ..eval.metrics import disparity_error
+    from ..matcher import Matcher
+    from ..runs.outputs import write_pair_outputs
 
     left, right, disparity = stereo_motorcycle()
     out = Path(args.output)
@@ -206,7 +92,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     for path, image in zip(paths, (left, right)):
         _write_rgb(path, image)
     image0, image1 = left.astype(np.float32) / 255.0, right.astype(np.float32) / 255.0
-    result = Matcher(_config(args))(image0, image1)
+    result = Matcher(config_of(args))(image0, image1)
     error = disparity_error(result.keypoints0, result.keypoints1, disparity)
     known = np.isfinite(error)
     correct = known & (error < 15.0)
@@ -232,7 +118,7 @@ def _write_rgb(path: Path, rgb) -> None:
 
 
 def cmd_viz(args: argparse.Namespace) -> int:
-    from .slime.visualize import render_stages
+    from ..slime.visualize import render_stages
 
     written = render_stages(args.stages, args.image0, args.image1, args.output, stages=args.stage)
     for path in written:
@@ -241,7 +127,7 @@ def cmd_viz(args: argparse.Namespace) -> int:
 
 
 def cmd_colmap(args: argparse.Namespace) -> int:
-    from .runs.colmap import DATABASE_FILE, SPARSE_FOLDER, export_run
+    from ..runs.colmap import DATABASE_FILE, SPARSE_FOLDER, export_run
 
     summary = export_run(args.run, args.images, args.output, merge_radius=args.merge_radius,
                          inliers_only=args.inliers_only, camera_mode=args.camera_mode,
@@ -260,7 +146,7 @@ def cmd_colmap(args: argparse.Namespace) -> int:
 
 
 def cmd_hloc(args: argparse.Namespace) -> int:
-    from .runs.hloc import FEATURES_FILE, MATCHES_FILE, export_hloc
+    from ..runs.hloc import FEATURES_FILE, MATCHES_FILE, export_hloc
 
     summary = export_hloc(args.run, args.images, args.output, merge_radius=args.merge_radius,
                           inliers_only=args.inliers_only, overwrite=args.overwrite)
@@ -297,8 +183,8 @@ def build_parser() -> argparse.ArgumentParser:
     match.add_argument("-o", "--output", required=True, help="output folder")
     match.add_argument("--save-stages", action="store_true", help="also write Slime's stage sets (stages.npz)")
     match.add_argument("--no-plot", action="store_true", help="skip matches.png")
-    _add_match_options(match)
-    _add_workers_option(match)
+    add_match_options(match)
+    add_workers_option(match)
     match.set_defaults(func=cmd_match)
 
     pairs = sub.add_parser("pairs", help="match many pairs listed in a file (resumable, optional workers)")
@@ -314,7 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
     pairs.add_argument("--feature-cache-mb", type=float, default=None, metavar="MB",
                        help="memory for Slime's block and tile features of recent images, reused by later pairs "
                             "with the same image (the same matches; default 512; 0: off)")
-    _add_match_options(pairs)
+    add_match_options(pairs)
     pairs.set_defaults(func=cmd_pairs)
 
     make = sub.add_parser("make-pairs", help="write a pairs file for `slime pairs` from an image folder (every "
@@ -329,8 +215,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     demo = sub.add_parser("demo", help="match a bundled real stereo pair (Middlebury motorcycle) and score it")
     demo.add_argument("-o", "--output", default="slime_demo", help="output folder (default slime_demo/)")
-    _add_match_options(demo)
-    _add_workers_option(demo)
+    add_match_options(demo)
+    add_workers_option(demo)
     demo.set_defaults(func=cmd_demo)
 
     viz = sub.add_parser("viz", help="draw Slime stages saved by `slime match --save-stages`")
@@ -341,7 +227,7 @@ def build_parser() -> argparse.ArgumentParser:
     viz.add_argument("--stage", action="append", default=None, help="stage name(s) to draw (default: all)")
     viz.set_defaults(func=cmd_viz)
 
-    from .runs.colmap import CAMERA_MODES
+    from ..runs.colmap import CAMERA_MODES
 
     colmap = sub.add_parser("colmap", help="a `slime pairs` run as a COLMAP database and its sparse "
                                            "reconstruction (needs pycolmap)")
@@ -362,7 +248,7 @@ def build_parser() -> argparse.ArgumentParser:
     hloc.add_argument("-v", "--verbose", action="store_true", help="log what was written")
     hloc.set_defaults(func=cmd_hloc)
 
-    from .eval.bench import add_bench_parser
+    from ..eval.bench import add_bench_parser
 
     add_bench_parser(sub)
 
@@ -402,6 +288,3 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {type(error).__name__}: {error} (rerun with --debug for details)", file=sys.stderr)
         return 1
 
-
-if __name__ == "__main__":
-    sys.exit(main())

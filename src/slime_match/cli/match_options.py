@@ -1,0 +1,123 @@
+"""The matching options of ``slime match``, ``slime pairs`` and ``slime demo``, and the configuration they
+build (a preset or a recorded configuration, then the options given)."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..errors import ConfigError
+
+
+def add_match_options(parser: argparse.ArgumentParser) -> None:
+    from ..config import DEVICES, methods
+    from ..features.descriptors import DESCRIPTOR_CHOICES
+    from ..features.orientation import ORIENTATION_CHOICES
+    from ..features.shape import SHAPE_METHODS
+    from ..geometry.backends import RANSAC_CHOICES
+    from ..pipelines import base_names
+    from ..slime.levels import DETECTIONS
+    from ..slime.refine import TILE_TESTS
+
+    parser.add_argument("--method", default=None, choices=methods(),
+                        help="Slime (default) or a base pipeline alone")
+    parser.add_argument("--base", default=None, choices=base_names(),
+                        help="base pipeline run inside Slime (default hz+)")
+    parser.add_argument("--descriptor", default=None, choices=DESCRIPTOR_CHOICES,
+                        help="Hz+ / Key.Net descriptor; auto = HardNet when its weights are available, else "
+                             "RootSIFT (Key.Net: TFeat)")
+    parser.add_argument("--shape", default=None, choices=SHAPE_METHODS, help="Hz+ affine shape")
+    parser.add_argument("--orientation", default=None, choices=ORIENTATION_CHOICES,
+                        help="Hz+ patch orientation")
+    parser.add_argument("--upright", action="store_true", default=None,
+                        help="no orientation estimation (the paper's upright variants)")
+    parser.add_argument("--ransac", default=None, choices=RANSAC_CHOICES, help="post-processing RANSAC (default none)")
+    parser.add_argument("--threshold", type=float, default=None,
+                        help="inlier threshold in px of the --ransac post-processing (default 3)")
+    parser.add_argument("--seed", type=int, default=None, help="random seed (RANSAC sampling; default 0)")
+    parser.add_argument("--device", default=None, choices=DEVICES, help="default auto: CUDA when available")
+    parser.add_argument("--weights-dir", default=None, help="folder with model weights (else TORCH_HOME cache)")
+    parser.add_argument("-v", "--verbose", action="store_true",
+                        help="log each stage as it finishes (seconds) and Slime's block and tile layout")
+    parser.add_argument("--max-side", type=int, default=None, metavar="PX",
+                        help="shrink images whose longest side is larger to this many px before matching "
+                             "(matches come back in original pixels); faster and lighter on large photos")
+    parser.add_argument("--magnification", type=float, default=None,
+                        help="patch size over the detected region (default 6 over HarrisZ+ ellipses, 1 over "
+                             "Key.Net frames); smaller patches give a weaker base (docs/coverage.md)")
+    parser.add_argument("--scales", type=parse_scales, default=None,
+                        help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper; "
+                             "1,2 is about 2.5x faster, 1,2,3,4 covers more at about 2.5x the time; see the README)")
+    parser.add_argument("--detection", default=None, choices=DETECTIONS,
+                        help="Slime: how blocks get keypoints: 'merged' (the hz+ default) detects every block "
+                             "crop on its own and describes shared keypoints once, 'block' also describes per "
+                             "crop (the paper's prototype, slower), 'scale' detects once per block scale "
+                             "(fastest, the RootSIFT and Key.Net default; fewer matches in low-texture scenes)")
+    parser.add_argument("--tile-test", default=None, choices=TILE_TESTS,
+                        help="Slime: which full-resolution tile matches to keep: 'flow' (the paper's default: "
+                             "near a match of the selected planes), 'plane' (fits the plane's homography over "
+                             "the whole tile pair: more coverage, docs/coverage.md)")
+    parser.add_argument("--set", dest="settings", action="append", default=[], type=parse_setting,
+                        metavar="OPTION=VALUE",
+                        help="any option by its dotted path, e.g. slime.tiles.t_xi=12 or base.blob.shortlist_k=5 "
+                             "(repeatable; every path is in a run's summary.json, under config)")
+    parser.add_argument("--config", default=None, metavar="SUMMARY.json",
+                        help="start from the configuration a run recorded (its summary.json) instead of the "
+                             "method's preset; the options given here change it")
+
+
+def add_workers_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--workers", dest="slime_workers", type=positive_int, default=None, metavar="N",
+                        help="processes for Slime's parallel steps (default: one per CPU this process may use, "
+                             "its affinity mask and cgroup quota; 1: no forks); the matches do not depend on it")
+
+
+def positive_int(text: str) -> int:
+    """An integer >= 1 (an argparse type: anything else raises ArgumentTypeError)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected at least 1, got {value}")
+    return value
+
+
+def parse_scales(text: str) -> tuple[int, ...]:
+    """Slime block scales from ``"1,2,3"`` (an argparse type: bad text raises ArgumentTypeError)."""
+    try:
+        scales = tuple(int(part) for part in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"scales must be comma-separated integers, got {text!r}") from None
+    if not scales or min(scales) < 1:
+        raise argparse.ArgumentTypeError(f"scales must be positive block counts, got {text!r}")
+    return scales
+
+
+def parse_setting(text: str) -> tuple[str, str]:
+    """``OPTION=VALUE`` of ``--set`` (an argparse type: text without '=' raises ArgumentTypeError)."""
+    path, sep, value = text.partition("=")
+    if not sep or not path.strip():
+        raise argparse.ArgumentTypeError(f"expected OPTION=VALUE (e.g. slime.tiles.t_xi=12), got {text!r}")
+    return path.strip(), value.strip()
+
+
+def options_of(args: argparse.Namespace) -> dict:
+    keys = ("method", "base", "descriptor", "shape", "orientation", "upright", "ransac", "threshold", "seed", "device",
+            "weights_dir", "magnification", "scales", "detection", "tile_test", "max_side")
+    return {key: getattr(args, key) for key in keys} | {"workers": getattr(args, "slime_workers", None)}
+
+
+def config_of(args: argparse.Namespace):
+    from ..config import MatchConfig, make_config, with_options
+
+    options = options_of(args) | dict(args.settings)
+    if args.config:
+        config = with_options(MatchConfig.load(args.config), **options)
+    else:
+        config = make_config(options.pop("method") or "slime", **options)
+    if getattr(args, "save_stages", False):
+        if config.method != "slime":
+            raise ConfigError(f"--save-stages writes Slime's stages, but --method {config.method} runs the "
+                              "base pipeline alone")
+        config.slime.keep_stages = True
+    return config
