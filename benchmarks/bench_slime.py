@@ -289,7 +289,7 @@ def _print_ablation(label: str, out: dict) -> None:
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--device", default="cpu", choices=("cpu", "cuda"), help="torch device")
-    parser.add_argument("--descriptor", default="tfeat", choices=("tfeat", "hardnet"),
+    parser.add_argument("--descriptor", default="tfeat", choices=("tfeat", "hardtfeat", "hardnet"),
                         help="descriptor of the learned (AffNet + OriNet) runs")
     parser.add_argument("--out", default="results/bench_slime.json", help="JSON output path")
     parser.add_argument("--data", default=str(SHARED / "data"), help="folder holding oxford_graf/")

@@ -15,7 +15,7 @@ from ._runtime import compiled
 from ._runtime.timing import StageTimer
 from .config import MatchConfig, make_config
 from .errors import ConfigError, ImageError, caused_by_interrupt
-from .features.descriptors import resolve_descriptor
+from .features.descriptors import AUTO_ORDER, resolve_descriptor
 from .geometry.backends import estimate_geometry
 from .geometry.frames import Frame
 from .io import MIN_IMAGE_SIDE, ImageLike, load_image
@@ -62,8 +62,9 @@ class Matcher:
         self.warnings: list[str] = []
         base = self.config.base
         if "descriptor" in PIPELINES[base.name].options and base.descriptor == "auto":
-            fallback = "tfeat" if base.name == "keynet" else "rootsift"  # Key.Net's patch descriptors are networks
-            base.descriptor, warning = resolve_descriptor("auto", weights_dir=base.weights_dir, fallback=fallback)
+            # Key.Net's pipeline describes with networks only
+            candidates = AUTO_ORDER[:-1] if base.name == "keynet" else AUTO_ORDER
+            base.descriptor, warning = resolve_descriptor("auto", weights_dir=base.weights_dir, candidates=candidates)
             if warning:
                 logger.warning(warning)
                 self.warnings.append(warning)

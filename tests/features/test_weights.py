@@ -1,16 +1,20 @@
-"""Weights: kornia's cache layout, HardNet's real checkpoint format, clear errors without network."""
+"""Weights: kornia's cache layout, HardNet's and HardTFeat's real checkpoints, "auto"'s choice, clear errors
+without network."""
 
+import shutil
 import socket
 
 import kornia
 import kornia.core.download as kdownload
 import pytest
 import torch
+import torch.nn.functional as F
+from conftest import WEIGHTS
 
 from slime_match.errors import WeightsNotFoundError
-from slime_match.features.descriptors import Descriptor, resolve_descriptor
+from slime_match.features.descriptors import AUTO_ORDER, Descriptor, resolve_descriptor
 from slime_match.features.laf import PatchPyramid, ellipse_to_laf
-from slime_match.features.weights import checkpoint_dir, is_cached, load_model
+from slime_match.features.weights import checkpoint_dir, is_cached, load_model, load_state_dict
 
 
 @pytest.fixture
@@ -66,10 +70,40 @@ def test_missing_weights_raise_with_alternatives(tmp_path, no_network, name, alt
 def test_auto_descriptor_falls_back_to_rootsift_with_warning(tmp_path, no_network):
     name, warning = resolve_descriptor("auto", tmp_path)
     assert name == "rootsift"
-    assert "using rootsift instead" in warning and "--descriptor tfeat or rootsift" in warning
+    assert "hardnet, hardtfeat, tfeat unavailable, using rootsift (weight-free) instead" in warning
+    assert "--descriptor tfeat or rootsift" in warning
     assert resolve_descriptor("tfeat", tmp_path) == ("tfeat", None)
-    name, warning = resolve_descriptor("auto", tmp_path, fallback="tfeat")  # Key.Net's fallback
-    assert name == "tfeat" and "using tfeat instead" in warning
+    with pytest.raises(WeightsNotFoundError, match="none of hardnet, hardtfeat, tfeat is available"):
+        resolve_descriptor("auto", tmp_path, candidates=AUTO_ORDER[:-1])  # a pipeline that needs a network
+
+
+@pytest.mark.parametrize(("present", "chosen", "passed_over"),
+                         [("HardTFeat.pth", "hardtfeat", "hardnet"), ("tfeat-liberty.params", "tfeat", "hardnet, hardtfeat")])
+def test_auto_descriptor_takes_the_best_available(tmp_path, no_network, present, chosen, passed_over):
+    source = WEIGHTS / "hub" / "checkpoints" / present
+    if not source.is_file():
+        pytest.skip(f"needs {source}")
+    shutil.copy(source, tmp_path / present)
+    name, warning = resolve_descriptor("auto", tmp_path)
+    assert name == chosen and f"{passed_over} unavailable, using {chosen} (learned) instead" in warning
+
+
+def test_hardtfeat_is_tfeat_with_its_own_weights():
+    """HardTFeat's checkpoint in kornia's TFeat gives the network its authors trained: per-patch normalisation,
+    two convolutions with tanh and max pooling, and an 8x8 convolution with tanh as the descriptor."""
+    if not is_cached("hardtfeat"):
+        pytest.skip("needs ../shared/weights")
+    raw = load_state_dict("hardtfeat")["state_dict"]
+    patches = torch.rand(6, 1, 32, 32)
+    flat = patches.reshape(6, -1)
+    x = (patches - flat.mean(1).view(6, 1, 1, 1)) / (flat.std(1, unbiased=False).view(6, 1, 1, 1) + 1e-7)
+    x = F.max_pool2d(torch.tanh(F.conv2d(x, raw["features.0.weight"], raw["features.0.bias"])), 2)
+    x = torch.tanh(F.conv2d(x, raw["features.3.weight"], raw["features.3.bias"]))
+    expect = torch.tanh(F.conv2d(x, raw["classifier.1.weight"], raw["classifier.1.bias"])).reshape(6, -1)
+    with torch.inference_mode():
+        got = load_model("hardtfeat")(patches)
+    assert got.shape == (6, 128) and torch.allclose(got, expect, atol=1e-3)
+    assert Descriptor("hardtfeat").describe_patches(patches).norm(dim=1).allclose(torch.ones(6))
 
 
 def test_shared_weights_load(no_network):

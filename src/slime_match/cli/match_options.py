@@ -23,8 +23,9 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--base", default=None, choices=base_names(),
                         help="base pipeline run inside Slime (default hz+)")
     parser.add_argument("--descriptor", default=None, choices=DESCRIPTOR_CHOICES,
-                        help="Hz+ / Key.Net descriptor; auto = HardNet when its weights are available, else "
-                             "RootSIFT (Key.Net: TFeat)")
+                        help="Hz+ / Key.Net descriptor; auto = the best whose weights are available: HardNet, "
+                             "HardTFeat (TFeat trained with HardNet's loss), TFeat, then RootSIFT (weight-free; "
+                             "not for Key.Net)")
     parser.add_argument("--shape", default=None, choices=SHAPE_METHODS, help="Hz+ affine shape")
     parser.add_argument("--orientation", default=None, choices=ORIENTATION_CHOICES,
                         help="Hz+ patch orientation")

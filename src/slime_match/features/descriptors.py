@@ -1,4 +1,5 @@
-"""Patch descriptors: HardNet, TFeat (learned, kornia weights) and RootSIFT (weight-free), all L2-normalised.
+"""Patch descriptors: HardNet, HardTFeat, TFeat (learned, kornia models) and RootSIFT (weight-free), all
+L2-normalised.
 
 The networks run as inference copies (:func:`~slime_match.features.inference.fuse_for_inference`); RootSIFT
 is the vectorised :class:`~slime_match.features.gradients.SIFTPatchDescriptor` (kornia's ``SIFTDescriptor``
@@ -19,8 +20,9 @@ from slime_match.features.inference import fuse_for_inference
 from slime_match.features.laf import PatchPyramid
 from slime_match.features.weights import is_cached, load_model, load_state_dict
 
-DESCRIPTOR_METHODS = ("hardnet", "tfeat", "rootsift")
+DESCRIPTOR_METHODS = ("hardnet", "hardtfeat", "tfeat", "rootsift")
 DESCRIPTOR_CHOICES = ("auto", *DESCRIPTOR_METHODS)  # what a configuration may name; "auto": see resolve_descriptor
+AUTO_ORDER = DESCRIPTOR_METHODS  # "auto" takes the first available: HardNet, HardTFeat, TFeat, then RootSIFT
 
 
 @dataclass
@@ -39,36 +41,50 @@ class DescriptorConfig:
 
 
 def resolve_descriptor(name: str, weights_dir: str | Path | None = None,
-                       fallback: str = "rootsift") -> tuple[str, str | None]:
-    """Concrete descriptor for a name; "auto" is HardNet when its weights are cached or downloadable (when no
-    download host resolves, "auto" takes the fallback at once instead of retrying).
+                       candidates: tuple[str, ...] = AUTO_ORDER) -> tuple[str, str | None]:
+    """Concrete descriptor for a name; "auto" is the first of ``candidates`` whose weights are cached or
+    downloadable (when no download host resolves, a missing one is passed over at once instead of retried).
 
     Args:
         name: "auto" or one of :data:`DESCRIPTOR_METHODS`.
         weights_dir: see :func:`slime_match.features.weights.checkpoint_dir`.
-        fallback: the descriptor "auto" names (with a warning) when HardNet is unavailable.
+        candidates: the descriptors "auto" may take, best first (:data:`AUTO_ORDER`; a pipeline that needs a
+            network leaves out "rootsift").
 
     Returns:
-        (descriptor name, warning text for the caller to record, or None).
+        (descriptor name, warning text for the caller to record when "auto" could not take the best one, or
+        None).
+
+    Raises:
+        WeightsNotFoundError: "auto" and no candidate is available.
     """
     if name != "auto":
         if name not in DESCRIPTOR_METHODS:
             raise ConfigError(f"unknown descriptor {name!r}; choose auto or one of {', '.join(DESCRIPTOR_METHODS)}")
         return name, None
-    if is_cached("hardnet", weights_dir):
-        return "hardnet", None
-    try:  # downloads into the cache; offline, "auto" does not wait out the downloader's retries
-        load_state_dict("hardnet", weights_dir, retry_offline=False)
-    except WeightsNotFoundError as exc:
-        return fallback, f"descriptor 'auto': HardNet unavailable, using {fallback} instead. {exc}"
-    return "hardnet", None
+    missing = []
+    for candidate in candidates:
+        if candidate == "rootsift" or is_cached(candidate, weights_dir):
+            break
+        try:  # downloads into the cache; offline, "auto" does not wait out the downloader's retries
+            load_state_dict(candidate, weights_dir, retry_offline=False)
+            break
+        except WeightsNotFoundError as exc:
+            missing.append((candidate, exc))
+    else:
+        raise WeightsNotFoundError(f"descriptor 'auto': none of {', '.join(candidates)} is available. {missing[-1][1]}")
+    if not missing:
+        return candidate, None
+    kind = "weight-free" if candidate == "rootsift" else "learned"
+    return candidate, (f"descriptor 'auto': {', '.join(c for c, _ in missing)} unavailable, using {candidate} "
+                       f"({kind}) instead. {missing[0][1]}")
 
 
 class Descriptor:
     """Describe LAF patches.
 
     Args:
-        method: "hardnet", "tfeat" or "rootsift".
+        method: "hardnet", "hardtfeat", "tfeat" or "rootsift".
         device: torch device of the network.
         weights_dir: see :func:`slime_match.features.weights.checkpoint_dir`.
         config: options; defaults of :class:`DescriptorConfig`.
@@ -93,7 +109,7 @@ class Descriptor:
 
     @property
     def dim(self) -> int:
-        """Descriptor length (128 for all three)."""
+        """Descriptor length (128 for all of them)."""
         return 128
 
     @torch.inference_mode()

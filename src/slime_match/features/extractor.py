@@ -49,7 +49,7 @@ class PatchConfig:
     Attributes:
         shape: "affnet", "baumberg" or "none" (keep the detector ellipse).
         orientation: "orinet", "gradient" or "upright".
-        descriptor: "hardnet", "tfeat" or "rootsift" (resolve "auto" first with
+        descriptor: "hardnet", "hardtfeat", "tfeat" or "rootsift" (resolve "auto" first with
             :func:`slime_match.features.descriptors.resolve_descriptor`).
         magnification: patch half-width over the detector ellipse, for every stage.
         patch_size: patch side in pixels (the networks need 32).

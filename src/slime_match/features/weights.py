@@ -1,9 +1,10 @@
-"""Find and load the kornia network weights (AffNet, OriNet, HardNet, TFeat, Key.Net).
+"""Find and load the network weights (AffNet, OriNet, HardNet, HardTFeat, TFeat, Key.Net), as kornia models.
 
 Weights live in kornia's torch-hub cache, ``<TORCH_HOME>/hub/checkpoints`` (``torch.hub.get_dir()``), or in
 an explicit ``weights_dir`` (a torch-home-like folder with ``hub/checkpoints``, or the checkpoint folder
-itself). Loading goes through kornia's own downloader with kornia's URLs, so a missing file is fetched
-into that folder when the network allows it (e.g. HardNet's ``checkpoint_liberty_with_aug.pth``); when it
+itself). Loading goes through kornia's own downloader with kornia's URLs (HardTFeat, which kornia does not
+list, from the AffNet repository), so a missing file is fetched into that folder when the network allows it
+(e.g. HardNet's ``checkpoint_liberty_with_aug.pth``); when it
 does not, :class:`~slime_match.errors.WeightsNotFoundError` names the weight-free alternatives. There is
 no silent fallback.
 """
@@ -14,6 +15,7 @@ import importlib
 import logging
 import socket
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlparse
@@ -24,6 +26,21 @@ from torch import nn
 from slime_match.errors import ConfigError, WeightsNotFoundError
 
 logger = logging.getLogger("slime_match")
+
+
+# TFeat's architecture trained with HardNet's loss by the AffNet authors (MIT), at the root of their repository
+HARDTFEAT_URL = "https://github.com/ducha-aiki/affnet/raw/master/HardTFeat.pth"
+
+
+def hardtfeat_as_tfeat(state: dict) -> dict:
+    """HardTFeat's state dict as kornia ``TFeat``'s: its two convolutions ``features.0`` and ``features.3`` are
+    TFeat's ``features.1`` and ``features.4``, and its 8x8 convolution ``classifier.1`` over the (64, 8, 8) map is
+    TFeat's ``Linear(4096, 128)`` (the same products, weights (128, 64, 8, 8) flattened as TFeat flattens the
+    map). The per-patch normalisation by mean and std is TFeat's ``InstanceNorm2d``."""
+    head = state["classifier.1.weight"]
+    return {"features.1.weight": state["features.0.weight"], "features.1.bias": state["features.0.bias"],
+            "features.4.weight": state["features.3.weight"], "features.4.bias": state["features.3.bias"],
+            "descr.0.weight": head.reshape(head.shape[0], -1), "descr.0.bias": state["classifier.1.bias"]}
 
 
 @dataclass(frozen=True)
@@ -38,6 +55,8 @@ class _Spec:
     strict: bool
     alternatives: str
     urls_attr: str = "urls"  # module attribute holding the URLs (a dict indexed by url_key, or the URL list)
+    own_urls: tuple[str, ...] = ()  # where kornia knows no URL for these weights: ours
+    convert: Callable[[dict], dict] | None = None  # the checkpoint's state dict as the kornia class's
 
 
 SPECS: dict[str, _Spec] = {
@@ -48,6 +67,10 @@ SPECS: dict[str, _Spec] = {
     "tfeat": _Spec(
         "kornia.feature.tfeat", "liberty", "TFeat", "tfeat-liberty.params", None, True,
         "--descriptor rootsift (or hardnet)",
+    ),
+    "hardtfeat": _Spec(
+        "kornia.feature.tfeat", "", "TFeat", "HardTFeat.pth", "state_dict", True, "--descriptor tfeat or rootsift",
+        own_urls=(HARDTFEAT_URL,), convert=hardtfeat_as_tfeat,
     ),
     "affnet": _Spec(
         "kornia.feature.affine_shape", "affnet", "LAFAffNetShapeEstimator", "AffNet.pth", "state_dict", False,
@@ -100,6 +123,8 @@ def is_cached(name: str, weights_dir: str | Path | None = None) -> bool:
 
 
 def _download_urls(spec: _Spec) -> list[str]:
+    if spec.own_urls:
+        return list(spec.own_urls)
     """kornia's URLs for a model, in the order its downloader tries them."""
     urls = getattr(importlib.import_module(spec.module), spec.urls_attr)
     urls = urls[spec.url_key] if spec.url_key else urls
@@ -122,7 +147,7 @@ def load_state_dict(name: str, weights_dir: str | Path | None = None, retry_offl
     """Checkpoint of model ``name`` through kornia's downloader (cache hit, else download).
 
     Args:
-        name: "hardnet", "tfeat", "affnet", "orinet" or "keynet".
+        name: "hardnet", "hardtfeat", "tfeat", "affnet", "orinet" or "keynet".
         weights_dir: see :func:`checkpoint_dir`.
         retry_offline: when no download host resolves, still let kornia try (it retries such failures for
             up to about 10 s, in case the network is back); False fails at once.
@@ -169,5 +194,6 @@ def load_model(name: str, weights_dir: str | Path | None = None, device: str | t
     checkpoint = load_state_dict(name, weights_dir)
     model = getattr(importlib.import_module(spec.module), spec.cls)(pretrained=False)
     state = checkpoint[spec.state_key] if spec.state_key is not None else checkpoint
+    state = spec.convert(state) if spec.convert is not None else state
     model.load_state_dict(state, strict=spec.strict)
     return model.eval().to(device)

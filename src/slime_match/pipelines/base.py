@@ -56,7 +56,8 @@ class BaseConfig:
             matching + DTM), "rootsift" (OpenCV DoG + RootSIFT + FGINN, the paper's handcrafted baseline),
             "keynet" (Key.Net + AffNet + OriNet + HardNet/TFeat + AdaLAM, kornia's detector, networks and
             matcher), or one added with ``register_pipeline``.
-        descriptor: Hz+ descriptor: "auto" | "hardnet" | "tfeat" | "rootsift" (Key.Net: "hardnet" | "tfeat").
+        descriptor: Hz+ descriptor: "auto" | "hardnet" | "hardtfeat" | "tfeat" | "rootsift" (Key.Net: a
+            learned one); "auto" takes the best available (HardNet, HardTFeat, TFeat, then RootSIFT).
         shape: Hz+ affine shape: "affnet" | "baumberg" (Key.Net: "affnet").
         orientation: Hz+ orientation: "orinet" | "gradient" | "upright" (Key.Net: "orinet" | "upright").
         upright: no orientation estimation at all (the paper's upright variants); overrides ``orientation``.

@@ -54,8 +54,9 @@ class KeyNetPipeline(BasePipeline):
 
         from ..features.weights import load_model
 
-        if config.descriptor not in ("hardnet", "tfeat"):
-            raise ConfigError(f"the keynet base pipeline describes with hardnet or tfeat, not {config.descriptor!r}")
+        if config.descriptor not in ("hardnet", "hardtfeat", "tfeat"):
+            raise ConfigError("the keynet base pipeline describes with hardnet, hardtfeat or tfeat, not "
+                              f"{config.descriptor!r}")
         if config.shape != "affnet":
             raise ConfigError(f"the keynet base pipeline uses AffNet shapes, not {config.shape!r}")
         upright = config.upright or config.orientation == "upright"
