@@ -107,3 +107,13 @@ def test_block_planes_gathers_the_refined_planes_in_original_pixels(levels):
     np.testing.assert_array_equal(arrays["block_matches_plane"], raw.source)
     np.testing.assert_array_equal(arrays["table_weight"], table.weight)
     assert arrays["table_weight"].sum() == len(raw)
+
+
+def test_a_plane_counts_distinct_keypoints():
+    """Four matches of one keypoint of image 0 to four of image 1 are one keypoint there, not four."""
+    from slime_match.slime.block_planes import distinct_keypoints
+    from slime_match.types import Matches
+
+    matches = Matches(np.array([0, 0, 0, 0, 1]), np.array([0, 1, 2, 3, 4]), np.zeros(5))
+    assert distinct_keypoints(matches) == 2
+    assert distinct_keypoints(Matches.empty()) == 0

@@ -1,5 +1,6 @@
 """Blocks and tiles: grid geometry, coordinate maps, core membership."""
 
+import cv2
 import numpy as np
 import pytest
 
@@ -99,3 +100,28 @@ def test_bad_config():
         BlockConfig(scales=(0, 1))
     with pytest.raises(ConfigError, match="distinct"):
         BlockConfig(scales=(1, 2, 1))
+
+
+def test_off_border_marks_points_near_the_image_border_of_a_crop():
+    """A corner block's crop starts 32 px before the image: its points within 2 px of the image's first row or
+    column, or of its last ones, are on the border (where the zero-filled padding makes an edge)."""
+    block = make_blocks(480, 640)[0]  # scale 1, first column: box (-32, -32, 224, 224) of a 256 x 192 image
+    assert block.box[:2] == (-32, -32) and block.scaled_size == (256, 192)
+    local = np.array([[32.0, 40.0], [33.4, 40.0], [33.6, 40.0], [100.0, 32.0 + 190.0], [100.0, 32.0 + 189.0]])
+    assert block.off_border_local(local).tolist() == [False, False, True, False, True]
+    assert block.off_border_local(local, margin=0.0).tolist() == [True] * 5
+
+
+def test_block_detection_drops_the_crops_border_keypoints():
+    """HarrisZ+ fires on the edge between a crop's zero-filled padding and the image; the blocks keep none of
+    its keypoints within 2 px of the image border (the whole-image detection keeps its own)."""
+    import torch
+
+    from slime_match.features.harrisz import detect_harrisz
+
+    rng = np.random.default_rng(3)
+    texture = cv2.GaussianBlur(rng.random((192, 256)).astype(np.float32), (0, 0), 3) * 0.5 + 0.25
+    block = make_blocks(480, 640)[0]
+    local = detect_harrisz(torch.from_numpy(block.crop(texture))[None]).xy.numpy()
+    on_edge = ~block.off_border_local(local) & block.in_core_local(local)
+    assert on_edge.sum() >= 3  # the artificial edge's keypoints, which the blocks drop

@@ -37,8 +37,18 @@ def test_flow_guide_equals_brute_force():
     d1 = np.linalg.norm(y1[:, None] - g1[None], axis=2)
     expected = (np.maximum(d0, d1) < 15.0).any(axis=1)
     assert expected.sum() > 50
-    assert np.array_equal(guide(y0, y1, neighbours=200), expected)
+    assert np.array_equal(guide(y0, y1), expected)
     assert FlowGuide(np.zeros((0, 2)), np.zeros((0, 2)), 15.0)(y0, y1).sum() == 0
+
+
+def test_flow_guide_finds_a_passing_guide_behind_many_nearer_failing_ones():
+    """Twenty guides 15.5 px off in image 0 alone (4-D distance 15.5, failing) and one 14 px off in both
+    images (4-D distance 19.8, passing): the candidate passes."""
+    g0 = np.vstack([np.tile([[15.5, 0.0]], (20, 1)), [[14.0, 0.0]]])
+    g1 = np.vstack([np.zeros((20, 2)), [[14.0, 0.0]]])
+    guide = FlowGuide(g0, g1, 15.0)
+    assert guide(np.zeros((1, 2)), np.zeros((1, 2))).tolist() == [True]
+    assert FlowGuide(g0[:20], g1[:20], 15.0)(np.zeros((1, 2)), np.zeros((1, 2))).tolist() == [False]
 
 
 def test_plane_guide_keeps_what_fits_one_of_the_given_planes():

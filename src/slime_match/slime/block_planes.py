@@ -19,7 +19,7 @@ from ..geometry.frames import stack_matrices
 from ..geometry.homography import project
 from ..geometry.ransac import HomographyRansacConfig
 from ..pipelines import BasePipeline
-from ..types import Features
+from ..types import Features, Matches
 from .blocks import Block
 from .fixed_descriptors import FixedDescriptors
 from .jobs import MatchJob, match_jobs, pair_workers, ransac_batches
@@ -27,7 +27,8 @@ from .levels import ScaleLevel
 from .match_table import MatchTable, deduplicate
 from .orientations import orientation_bin, relative_orientation
 
-__all__ = ["BlockPairMatches", "BlockPlanes", "block_planes", "block_planes_to_original", "match_block_pairs"]
+__all__ = ["BlockPairMatches", "BlockPlanes", "block_planes", "block_planes_to_original", "distinct_keypoints",
+           "match_block_pairs"]
 
 
 @dataclass
@@ -99,6 +100,9 @@ def match_block_pairs(
     """Secs. 3.2 + 3.3 for every block pair: base pipeline + homography RANSAC, then the re-run with
     fixed orientations (theta = 0 in image 0, theta* in image 1) + RANSAC -> M_l and H_l.
 
+    A plane needs ``min_matches`` RANSAC inliers with as many distinct keypoints in each image (the base
+    pipeline may match one keypoint several times).
+
     Returns:
         The refined planes and their matches, in level pixels, and counts for the summary: block pairs,
         first-run planes, pairs re-matched under fixed orientations (on an upright base none: the first run's
@@ -117,7 +121,7 @@ def match_block_pairs(
     results = ransac_batches([(xy0, xy1) for _, xy0, xy1 in first], ransac, seed, workers)
     thetas = {}
     for pair, (m, _, _), res in zip(pairs, first, results):
-        if res.model is None or res.inliers.sum() < min_matches:
+        if res.model is None or distinct_keypoints(m.subset(res.inliers)) < min_matches:
             continue
         m_in = m.subset(res.inliers)
         angle0 = side0.own(pair[0]).angle[torch.from_numpy(m_in.idx0)].cpu().numpy()
@@ -152,7 +156,7 @@ def match_block_pairs(
 
     keep_pairs, hs, theta_out, parts = [], [], [], []
     for pair, (m, _, _), res in zip(refined_pairs, second, results):
-        if res.model is None or res.inliers.sum() < min_matches:
+        if res.model is None or distinct_keypoints(m.subset(res.inliers)) < min_matches:
             continue
         m_in = m.subset(res.inliers)
         keep_pairs.append(pair)
@@ -162,6 +166,11 @@ def match_block_pairs(
     counts = {"block_pairs": len(pairs), "block_planes_first": len(thetas), "block_pairs_rerun": len(redo),
               "block_planes": len(keep_pairs)}
     return _collect(keep_pairs, hs, theta_out, parts), counts
+
+
+def distinct_keypoints(matches: Matches) -> int:
+    """The fewer of the two images' distinct keypoints among ``matches``."""
+    return min(len(np.unique(matches.idx0)), len(np.unique(matches.idx1)))
 
 
 def _collect(pairs, hs, thetas, parts) -> BlockPairMatches:

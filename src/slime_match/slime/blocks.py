@@ -51,6 +51,9 @@ __all__ = [
 ]
 
 
+BORDER_MARGIN = 2.0  # px: keypoints a block crop's detector finds this close to the image border are dropped
+
+
 @dataclass
 class BlockConfig:
     """Block/tile geometry (paper defaults, all in px of the scaled image).
@@ -141,6 +144,13 @@ class Block:
         lo, hi = _core_bounds(self)
         xy = np.asarray(xy, dtype=np.float64) + np.array(self.box[:2], dtype=np.float64)
         return np.all((xy >= lo) & (xy < hi), axis=1)
+
+    def off_border_local(self, xy: np.ndarray, margin: float = BORDER_MARGIN) -> np.ndarray:
+        """(N,) bool: block-image points (N, 2) at least ``margin`` px inside the scaled image's border, where a
+        detector sees the crop's zero-filled padding (:meth:`crop`) as an edge."""
+        xy = np.asarray(xy, dtype=np.float64) + np.array(self.box[:2], dtype=np.float64)
+        size = np.array(self.scaled_size, dtype=np.float64)
+        return np.all((xy >= margin - 0.5) & (xy <= size - 0.5 - margin), axis=1)
 
     def crop(self, scaled_image: np.ndarray) -> np.ndarray:
         """Cut the block from the scaled image, zero-filling the part of the box outside the image.

@@ -212,7 +212,8 @@ def _detected_keypoints(pipeline: BasePipeline, levels: list[_Detection], reques
         else:
             block = requests[d.request].blocks[i]
             keypoints = pipeline.detect_keypoints(block.crop(d.scaled), device)
-            core = torch.from_numpy(block.in_core_local(keypoints.xy.cpu().numpy())).to(keypoints.xy.device)
+            local = keypoints.xy.cpu().numpy()
+            core = torch.from_numpy(block.in_core_local(local) & block.off_border_local(local)).to(keypoints.xy.device)
             keypoints = keypoints.subset(core)
             xy = keypoints.xy.cpu().numpy() + np.array(block.box[:2], np.float32)
         return (xy, *(t.cpu().numpy() for t in (keypoints.ellipse, keypoints.response, keypoints.level)))
@@ -251,7 +252,8 @@ def _level(d: _Detection, features: Features, blocks: list[Block]) -> ScaleLevel
     if d.members is not None:  # merged detection: the blocks' own keypoints, described once
         return ScaleLevel(factor, d.scaled.shape[:2], d.context, features, d.blocks, d.members)
     if d.block is not None:  # a block crop: keep its core's features, in scaled-image pixels
-        inside = d.block.in_core_local(features.xy.detach().cpu().numpy())
+        local = features.xy.detach().cpu().numpy()
+        inside = d.block.in_core_local(local) & d.block.off_border_local(local)
         origin = (float(d.block.box[0]), float(d.block.box[1]))
         features = features.subset(torch.from_numpy(inside).to(features.laf.device)).moved(origin)
         return ScaleLevel(factor, d.scaled.shape[:2], d.context, features, d.blocks, [np.arange(len(features))],

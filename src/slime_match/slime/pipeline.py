@@ -49,8 +49,9 @@ class SlimeConfig:
         planes: expansion thresholds (t_perp = 15 px, t_theta = 67.5 deg, t_sigma = 3).
         tiles: tile-set logic (2 per tile pair, 4 per tile, t_xi = 9, t_ov = 1/3, 16 bins, 45 deg).
         bins: orientation histogram bins of the block-pair refinement (16).
-        min_plane_matches: a block pair yields a plane only with at least this many RANSAC inliers
-            (ours: the paper does not state a minimum; 4 would be any minimal sample).
+        min_plane_matches: a block pair yields a plane only with at least this many RANSAC inliers, as many
+            distinct keypoints in each image (ours: the paper does not state a minimum; 4 would be any minimal
+            sample).
         workers: processes for the detections, block pairs and tiles, and threads for the epipolar vote
             (None = one per CPU this process may use, ``available_cpus``; the matches do not depend on it).
             On CUDA the networks stay in one process and the workers run the block crops' detector and the

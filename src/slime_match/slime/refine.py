@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -24,7 +25,8 @@ from .orientations import orientation_bin
 class FlowGuide:
     """The flows (x, x') of the block matches of F^theta, to test tile candidates against.
 
-    A tile candidate (y, y') is kept when some guide match has ``max(|x - y|, |x' - y'|) < t``.
+    A tile candidate (y, y') is kept when some guide match has ``max(|x - y|, |x' - y'|) < t``: every guide
+    within ``t sqrt(2)`` of it in 4-D (which that bound implies) is tested.
     """
 
     xy0: np.ndarray
@@ -34,19 +36,19 @@ class FlowGuide:
     def __post_init__(self) -> None:
         self._tree = cKDTree(np.hstack([self.xy0, self.xy1])) if len(self.xy0) else None
 
-    def __call__(self, y0: np.ndarray, y1: np.ndarray, neighbours: int = 16) -> np.ndarray:
+    def __call__(self, y0: np.ndarray, y1: np.ndarray) -> np.ndarray:
         """(K,) bool: candidates (K, 2) <-> (K, 2) with a similar guide flow."""
         if self._tree is None or len(y0) == 0:
             return np.zeros(len(y0), bool)
-        k = min(neighbours, len(self.xy0))
-        # ||(dx, dx')|| < t sqrt(2) is implied by max(|dx|, |dx'|) < t: query that ball, then check exactly.
-        dist, index = self._tree.query(np.hstack([y0, y1]), k=k, distance_upper_bound=self.threshold * math.sqrt(2))
-        dist, index = dist.reshape(len(y0), k), index.reshape(len(y0), k)
-        valid = np.isfinite(dist)
-        index = np.where(valid, index, 0)
-        e0 = np.linalg.norm(self.xy0[index] - y0[:, None], axis=2)
-        e1 = np.linalg.norm(self.xy1[index] - y1[:, None], axis=2)
-        return (valid & (np.maximum(e0, e1) < self.threshold)).any(axis=1)
+        # ||(dx, dx')|| < t sqrt(2) is implied by max(|dx|, |dx'|) < t: every guide in that ball, checked exactly
+        near = self._tree.query_ball_point(np.hstack([y0, y1]), r=self.threshold * math.sqrt(2))
+        counts = np.fromiter(map(len, near), np.int64, len(near))
+        guide = np.fromiter(itertools.chain.from_iterable(near), np.int64, int(counts.sum()))
+        candidate = np.repeat(np.arange(len(y0)), counts)
+        e0 = np.linalg.norm(self.xy0[guide] - y0[candidate], axis=1)
+        e1 = np.linalg.norm(self.xy1[guide] - y1[candidate], axis=1)
+        passed = candidate[np.maximum(e0, e1) < self.threshold]
+        return np.bincount(passed, minlength=len(y0)) > 0
 
 
 @dataclass
