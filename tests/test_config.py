@@ -51,7 +51,7 @@ def test_set_option_reads_strings_by_type_and_rebuilds_the_path():
     ("slime.blocks.scales", "1,1", "scales must be distinct"),
     ("slime.tile_test", "edge", "invalid tile_test 'edge': choose one of flow, plane"),
     ("slime.workers", "0", "workers must be an integer of at least 1 or None, got 0"),
-    ("base.descriptor", "sift", "invalid descriptor 'sift': choose one of auto, hardnet, tfeat, rootsift"),
+    ("base.descriptor", "sift", "invalid descriptor 'sift': choose one of auto, hardnet, hardtfeat, tfeat, rootsift"),
     ("slime.tiles.nope", "1", "unknown option 'slime.tiles.nope': TileConfig has q_pair"),
     ("slime.nope.x", "1", "'slime.nope' is not a group of options"),
     ("base.descriptor.x", "1", "'base.descriptor' is not a group of options"),
