@@ -1,7 +1,8 @@
 """Refactoring guard: every method's matches on a few real pairs, bit for bit, as recorded in a fixture.
 
-Each case runs a matcher and compares a digest of its raw float64 outputs (keypoints, scores, and for one
-Slime case every ``--save-stages`` array) and its stage counts with ``data/identical_matches.json``. A change
+Each case runs a matcher on the CPU (a GPU rounds differently) and compares a digest of its raw float64
+outputs (keypoints, scores, and for one Slime case every ``--save-stages`` array) and its stage counts with
+``data/identical_matches.json``. A change
 of the code's structure must leave them equal; a change that alters the matches on purpose re-records them:
 
     python tests/test_identical_matches.py --record
@@ -75,7 +76,7 @@ def digest(array: np.ndarray) -> str:
 def outputs(case: str) -> dict:
     """What a case's run gives: matches count, digests of the outputs, the stage counts."""
     images, preset, options = CASES[case]
-    result = Matcher(make_config(preset, **options))(*load_pair(images))
+    result = Matcher(make_config(preset, device="cpu", **options))(*load_pair(images))
     arrays = {"keypoints0": result.keypoints0, "keypoints1": result.keypoints1, "scores": result.scores}
     arrays.update({f"stages.{k}": v for k, v in sorted((result.stages or {}).items())})
     return {"matches": len(result), "digests": {k: digest(v) for k, v in arrays.items()},
