@@ -102,11 +102,13 @@ class Matcher:
                                                   for image in (original0, original1))
         stages = None
         warnings = list(self.warnings)
+        decisions: dict[str, str] = {}
         if config.method == "slime":
             output = run_slime(self.pipeline, array0, array1, config.slime, timer, seed=config.seed,
                                level_cache=self.level_cache)
             xy0, xy1, scores, counts, stages = output.xy0, output.xy1, output.scores, output.counts, output.stages
             warnings += output.warnings
+            decisions = output.decisions
         else:
             xy0, xy1, scores, counts = self._run_base(array0, array1, timer)
         if (frame0, frame1) != (Frame(), Frame()):
@@ -134,6 +136,8 @@ class Matcher:
             "seconds": {**timer.as_dict(), "total": round(time.perf_counter() - start, 4)},
             "warnings": warnings,
         }
+        if decisions:
+            summary["decisions"] = decisions
         return MatchResult(xy0, xy1, scores, inliers, kind, model, summary, stages)
 
     def _run_base(self, array0: np.ndarray, array1: np.ndarray, timer: StageTimer):

@@ -118,6 +118,21 @@ def test_block_scale_presets():
     assert make_config("slime-fine").base.name == "hz+"
 
 
+def test_consensus_recovers_the_geometry_when_the_paper_vote_keeps_nothing(graf_small):
+    """A vote threshold no match can pass (t_xi = 1000) leaves the paper's rule empty; the default rule then
+    takes the largest consistent geometry, says so in the summary, and its matches follow the GT."""
+    a, b, h = graf_small
+    results = {vote: Matcher(make_config("slime", scales=(1, 2), **{"slime.tiles.t_xi": 1000,
+                                                                     "slime.tiles.vote": vote}, **WEIGHT_FREE))(a, b)
+               for vote in ("paper", "consensus")}
+    assert len(results["paper"]) == 0 and results["paper"].summary["decisions"]["vote"] == "paper"
+    found = results["consensus"]
+    decisions = found.summary["decisions"]
+    assert decisions["vote"] == "consensus" and "largest consistent geometry" in decisions["vote_reason"], decisions
+    ok = correct_matches_homography(found.keypoints0, found.keypoints1, h)
+    assert ok.sum() > 100 and ok.mean() >= 0.9, (int(ok.sum()), ok.mean())
+
+
 def test_empty_slime_result_says_why(graf_small):
     """A 120 x 90 crop has one tile: the epipolar vote cannot pass, and the summary says so."""
     a = graf_small[0][100:190, 100:220]

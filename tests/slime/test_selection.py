@@ -49,8 +49,9 @@ def test_select_planes_keeps_the_scene_and_drops_a_wrong_plane():
     assert len(selection.theta) == len(selection.ftheta)
     counts = selection.counts
     assert counts == {"tile_sets": len(sets), "superset_H": len(superset),
-                      "epipolar_kept": int(selection.keep.sum()), "fbar_sets": len(selection.fbar),
+                      "epipolar_kept": int(selection.keep.sum()), "epipolar_planes": 2, "fbar_sets": len(selection.fbar),
                       "ftheta_sets": len(selection.ftheta), "ftheta_matches": int(kept.sum())}
+    assert selection.vote == "paper" and "400 matches on 2 homographies" in selection.vote_reason
 
 
 def test_plane_selection_counts_and_arrays():
@@ -59,8 +60,8 @@ def test_plane_selection_counts_and_arrays():
     fbar = sets.subset([1, 3]).restrict(keep)
     fused = make_sets([[0, 1, 3], [6]], 8, tile0=[0, 2], tile1=[1, 2], plane=np.array([1, 3]))
     selection = PlaneSelection(sets, sets.subset([0, 1, 3]), keep, fbar, fused, fused.subset([0]),
-                               np.array([0.25]), 0.5)
-    assert selection.counts == {"tile_sets": 4, "superset_H": 3, "epipolar_kept": 5, "fbar_sets": 2,
+                               np.array([0.25]), 0.5, "consensus", "why", 3)
+    assert selection.counts == {"tile_sets": 4, "superset_H": 3, "epipolar_kept": 5, "epipolar_planes": 3, "fbar_sets": 2,
                                 "ftheta_sets": 1, "ftheta_matches": 3}
     arrays = selection.arrays()
     families = [f"{name}_{field}" for name in ("superset", "fbar", "ftheta")

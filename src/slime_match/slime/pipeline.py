@@ -105,7 +105,8 @@ class SlimeConfig:
 
 @dataclass
 class SlimeOutput:
-    """Final matches (original px), counts per stage, warnings (why a result is empty, slow layouts), and
+    """Final matches (original px), counts per stage, warnings (why a result is empty, slow layouts), the
+    rules that decided adaptive stages and why (e.g. ``{"vote": "consensus", "vote_reason": ...}``), and
     optionally every stage's arrays."""
 
     xy0: np.ndarray
@@ -114,6 +115,7 @@ class SlimeOutput:
     counts: dict[str, int]
     stages: dict[str, np.ndarray] | None
     warnings: list[str] = field(default_factory=list)
+    decisions: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
@@ -186,6 +188,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     with timer("plane_selection"):
         selection = select_planes(table, expansion.memberships, layout.tiles0, layout.tiles1, config.tiles,
                                   threads=workers)
+    logger.info("Sec. 3.6: %s", selection.vote_reason)
     ftheta = selection.ftheta
     in_ftheta = ftheta.union()
     tiles = None
@@ -210,7 +213,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     stages = None
     if config.keep_stages:
         stages = {name: array for result in (layout, *results[1:]) for name, array in result.arrays().items()}
-    return SlimeOutput(final.xy0, final.xy1, final.scores, counts, stages, warnings)
+    decisions = {"vote": selection.vote, "vote_reason": selection.vote_reason}
+    return SlimeOutput(final.xy0, final.xy1, final.scores, counts, stages, warnings, decisions)
 
 
 def _workers(requested: int | None) -> int:

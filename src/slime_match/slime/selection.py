@@ -8,7 +8,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from .blocks import Block
-from .epipolar_vote import epipolar_consistency
+from .consensus import epipolar_consensus
+from .epipolar_vote import PairFundamentals, epipolar_consistency
 from .fusion import fuse_planes, global_orientation_filter, greedy_two_per_tile, plane_groups
 from .match_table import MatchTable
 from .tile_sets import TileConfig, TileSets, best_sets_per_tile, best_sets_per_tile_pair, tile_sets
@@ -26,6 +27,8 @@ class PlaneSelection:
         fbar: F-bar; fused: F^{l*} (F-bar's sets fused with their near copies); ftheta: F^theta (the fused
             sets that agree with the global orientation).
         theta: (S,) each F^theta set's orientation, radians; theta_plus: the global orientation, radians.
+        vote: the rule that chose M+ ("paper" or "consensus"), and why (``vote_reason``).
+        vote_planes: distinct homographies in the chosen M+.
     """
 
     sets: TileSets
@@ -36,10 +39,14 @@ class PlaneSelection:
     ftheta: TileSets
     theta: np.ndarray
     theta_plus: float
+    vote: str
+    vote_reason: str
+    vote_planes: int
 
     @property
     def counts(self) -> dict[str, int]:
         return {"tile_sets": len(self.sets), "superset_H": len(self.superset), "epipolar_kept": int(self.keep.sum()),
+                "epipolar_planes": self.vote_planes,
                 "fbar_sets": len(self.fbar), "ftheta_sets": len(self.ftheta),
                 "ftheta_matches": int(self.ftheta.union().sum())}
 
@@ -61,8 +68,7 @@ def select_planes(table: MatchTable, expanded: sp.csr_matrix, tiles0: list[Block
     sets = tile_sets(table, expanded, tiles0, tiles1)
     star = sets.subset(best_sets_per_tile_pair(sets, w, q=config.q_pair))
     superset = star.subset(best_sets_per_tile(star, w, q=config.q_tile))
-    keep = epipolar_consistency(table, superset, t_perp=config.t_perp, t_xi=config.t_xi,
-                                min_union=config.min_union, chunk=config.chunk, threads=threads)
+    keep, vote, reason, n_planes = _epipolar_selection(table, superset, config, threads)
     filtered = superset.restrict(keep)
     groups = None if config.same_homography == "set" else plane_groups(filtered, config.t_ov,
                                                                          config.same_homography)
@@ -70,4 +76,32 @@ def select_planes(table: MatchTable, expanded: sp.csr_matrix, tiles0: list[Block
     fused = fuse_planes(sets.restrict(keep), fbar, w, t_ov=config.t_ov)
     ok, theta, theta_plus = global_orientation_filter(table, fused, bins=config.bins,
                                                       t_theta_plus=config.t_theta_plus)
-    return PlaneSelection(sets, superset, keep, fbar, fused, fused.subset(ok), theta[ok], theta_plus)
+    return PlaneSelection(sets, superset, keep, fbar, fused, fused.subset(ok), theta[ok], theta_plus, vote, reason,
+                          n_planes)
+
+
+def _homographies(table: MatchTable, sets: TileSets, keep: np.ndarray, t_ov: float) -> int:
+    """Distinct homographies (``plane_groups``) among the sets of ``sets`` holding a match of ``keep`` (M,)."""
+    held = sets.restrict(keep)
+    held = held.subset(np.flatnonzero(np.diff(held.indptr) > 0))
+    return len(np.unique(plane_groups(held, t_ov)[held.plane])) if len(held) else 0
+
+
+def _epipolar_selection(table: MatchTable, superset: TileSets, config: TileConfig, threads: int
+                        ) -> tuple[np.ndarray, str, str, int]:
+    """M+ (M,) bool by ``config.vote``, the rule that decided, why, and the homographies it spans."""
+    pairs = PairFundamentals(table, superset) if len(superset) >= 2 else None
+    keep = epipolar_consistency(table, superset, t_perp=config.t_perp, t_xi=config.t_xi, min_union=config.min_union,
+                                chunk=config.chunk, threads=threads, pairs=pairs)
+    n_planes = _homographies(table, superset, keep, config.t_ov)
+    if config.vote == "paper":
+        return keep, "paper", "the paper's vote (vote=paper)", n_planes
+    if keep.sum() >= config.min_union:
+        return keep, "paper", f"the paper's vote kept {int(keep.sum())} matches on {n_planes} homographies", n_planes
+    found = epipolar_consensus(table, superset, t_perp=config.t_perp, min_union=config.min_union, t_ov=config.t_ov,
+                               min_planes=config.min_planes, pairs=pairs)
+    weak = f"the paper's vote kept {int(keep.sum())} matches (fewer than min_union={config.min_union})"
+    if not found.keep.any():
+        return keep, "paper", f"{weak}, and no epipolar geometry has {config.min_planes} homographies", n_planes
+    chosen = f"the largest consistent geometry has {found.planes} homographies, {int(found.keep.sum())} matches"
+    return found.keep, "consensus", f"{weak}; {chosen}", found.planes

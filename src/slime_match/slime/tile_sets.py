@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from slime_match._runtime.options import check_choice, check_integer
 from slime_match.errors import ConfigError
 from slime_match.slime.tile_kernels import greedy_cover, tile_pair_sets
 
@@ -38,6 +39,7 @@ log = logging.getLogger("slime_match")
 
 
 SAME_HOMOGRAPHY = ("shared", "iou", "set")
+VOTE_RULES = ("consensus", "paper")
 
 
 @dataclass
@@ -49,6 +51,11 @@ class TileConfig:
         q_tile: best sets kept per tile of each image (H).
         t_perp: epipolar distance threshold in px.
         t_xi: a match is kept when it is an inlier of more than ``t_xi |H|`` of the F_dd'.
+        vote: which rule selects M+ (``VOTE_RULES``): "paper", the ``t_xi |H|`` vote alone; "consensus",
+            the vote, and when it keeps fewer than ``min_union`` matches, the largest epipolar geometry that
+            ``min_planes`` distinct homographies share instead (``consensus.epipolar_consensus``).
+        min_planes: distinct homographies that must agree on one epipolar geometry for it to count as
+            confirmed (two fix it, each more confirms it).
         min_union: F_dd' is estimated only from unions with at least this many distinct matches (the
             8-point algorithm is underdetermined below 8; such pairs vote for nothing).
         t_ov: IoU above which two sets of the same tile pair are fused.
@@ -64,6 +71,8 @@ class TileConfig:
     q_tile: int = 4
     t_perp: float = 15.0
     t_xi: float = 9.0
+    vote: str = "consensus"
+    min_planes: int = 3
     min_union: int = 8
     t_ov: float = 1.0 / 3.0
     same_homography: str = "shared"
@@ -76,6 +85,8 @@ class TileConfig:
             raise ConfigError("TileConfig: q_pair, q_tile, bins, chunk must be >= 1 and min_union >= 8")
         if self.t_perp <= 0 or self.t_xi < 0 or not 0 <= self.t_ov < 1 or self.t_theta_plus <= 0:
             raise ConfigError("TileConfig: need t_perp > 0, t_xi >= 0, 0 <= t_ov < 1, t_theta_plus > 0")
+        check_choice("vote", self.vote, VOTE_RULES)
+        check_integer("min_planes", self.min_planes, 3)
         if self.same_homography not in SAME_HOMOGRAPHY:
             raise ConfigError(f"TileConfig: same_homography {self.same_homography!r} is not one of "
                               f"{', '.join(SAME_HOMOGRAPHY)}")
