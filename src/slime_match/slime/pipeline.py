@@ -68,10 +68,11 @@ class SlimeConfig:
             block crop on its own but describes the keypoints shared by overlapping blocks once; None: the
             base pipeline's ``slime_detection`` ("merged" for Hz+, "scale" for RootSIFT and Key.Net).
         tile_detection: the same choice for the full-resolution tiles of Sec. 3.8 ("scale" by default).
-        tile_test: which tile candidates Sec. 3.8 keeps (``refine.TILE_TESTS``): "flow", the paper's (a match
-            of F^theta within t_perp at both ends); "plane" (within t_perp of the plane homography of one of
-            the tile pair's F^theta sets, on its side: the whole tile pair where the plane holds, not only
-            near the block matches; ours).
+        tile_test: which tile candidates Sec. 3.8 keeps (``refine.TILE_TESTS``): "plane" (within t_perp of
+            the plane homography of one of the tile pair's F^theta sets, on its side: the whole tile pair
+            where the plane holds, not only near the block matches; ours, the default: more coverage on
+            planar and hard pairs, docs/coverage.md); "flow", the paper's (a match of F^theta within t_perp
+            at both ends).
     """
 
     blocks: BlockConfig = field(default_factory=BlockConfig)
@@ -86,7 +87,7 @@ class SlimeConfig:
     keep_stages: bool = False
     detection: str | None = None
     tile_detection: str = "scale"
-    tile_test: str = "flow"
+    tile_test: str = "plane"
 
     def __post_init__(self) -> None:
         self.validate()
