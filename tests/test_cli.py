@@ -78,10 +78,10 @@ def test_slime_detection_option(pair, tmp_path, capsys):
 
 
 def test_slime_tile_test_option(pair, tmp_path, capsys):
-    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--tile-test", "plane", "--no-plot")
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--tile-test", "flow", "--no-plot")
     assert code == 0, err
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert summary["config"]["slime"]["tile_test"] == "plane" and summary["counts"]["tile_matches"] > 0
+    assert summary["config"]["slime"]["tile_test"] == "flow" and summary["counts"]["tile_matches"] > 0
     code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "r", "--method", "hz+", "--tile-test", "plane")
     assert code == 2 and "'tile_test' is a Slime option" in err and not (tmp_path / "r").exists()
 

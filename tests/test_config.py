@@ -49,7 +49,7 @@ def test_set_option_reads_strings_by_type_and_rebuilds_the_path():
     ("slime.tiles.t_xi", "many", "option 'slime.tiles.t_xi': cannot read 'many' as float"),
     ("slime.tiles.same_homography", "all", "same_homography 'all' is not one of shared, iou, set"),
     ("slime.blocks.scales", "1,1", "scales must be distinct"),
-    ("slime.tile_test", "edge", "invalid tile_test 'edge': choose one of flow, plane"),
+    ("slime.tile_test", "edge", "invalid tile_test 'edge': choose one of plane, flow"),
     ("slime.workers", "0", "workers must be an integer of at least 1 or None, got 0"),
     ("base.descriptor", "sift", "invalid descriptor 'sift': choose one of auto, hardnet, hardtfeat, tfeat, rootsift"),
     ("slime.tiles.nope", "1", "unknown option 'slime.tiles.nope': TileConfig has q_pair"),

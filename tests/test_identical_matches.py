@@ -36,7 +36,7 @@ CASES: dict[str, tuple[str, str, dict]] = {
     "graf-slime-tfeat": ("graf", "slime", {"descriptor": "tfeat", "keep_stages": True}),
     "graf-rotated-slime-weight-free": ("graf-rotated", "slime", WEIGHT_FREE),
     "graf-slime-upright-tfeat": ("graf", "slime-upright", {"descriptor": "tfeat"}),
-    "graf-slime-plane-block-detection": ("graf", "slime", {"tile_test": "plane", "detection": "block",
+    "graf-slime-flow-block-detection": ("graf", "slime", {"tile_test": "flow", "detection": "block",
                                                            **WEIGHT_FREE}),
     "scannet-hzplus-tfeat": ("scannet", "hz+", {"descriptor": "tfeat"}),
     "scannet-slime-tfeat": ("scannet", "slime", {"descriptor": "tfeat"}),

@@ -54,9 +54,9 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
                              "crop (the paper's prototype, slower), 'scale' detects once per block scale "
                              "(fastest, the RootSIFT and Key.Net default; fewer matches in low-texture scenes)")
     parser.add_argument("--tile-test", default=None, choices=TILE_TESTS,
-                        help="Slime: which full-resolution tile matches to keep: 'flow' (the paper's default: "
-                             "near a match of the selected planes), 'plane' (fits the plane's homography over "
-                             "the whole tile pair: more coverage, docs/coverage.md)")
+                        help="Slime: which full-resolution tile matches to keep: 'plane' (the default: fits the "
+                             "plane's homography over the whole tile pair, more coverage), 'flow' (the paper's: "
+                             "near a match of the selected planes)")
     parser.add_argument("--set", dest="settings", action="append", default=[], type=parse_setting,
                         metavar="OPTION=VALUE",
                         help="any option by its dotted path, e.g. slime.tiles.t_xi=12 or base.blob.shortlist_k=5 "
