@@ -22,7 +22,10 @@ def test_empty_result_reason_names_the_stage():
     # |H| (|H| - 1) ordered pairs of sets can never exceed 9 |H| votes when |H| <= 10
     impossible = empty_result_reason(_counts(superset_H=10, epipolar_kept=0), tiles)
     assert "cannot keep a match with only 10 tile match sets" in impossible and "out of 90" in impossible
-    assert "do not share one epipolar geometry" in empty_result_reason(_counts(superset_H=11, epipolar_kept=0), tiles)
+    shared = empty_result_reason(_counts(superset_H=11, epipolar_kept=0), tiles)
+    assert "do not share one epipolar geometry" in shared and "shared by 3 homographies" in shared
+    paper = empty_result_reason(_counts(superset_H=11, epipolar_kept=0), TileConfig(vote="paper"))
+    assert "do not share one epipolar geometry" in paper and "consensus" not in paper
     assert "Sec. 3.7" in empty_result_reason(_counts(ftheta_matches=0), tiles)
     assert "kept none of the 90 plane matches and 7 tile matches" in empty_result_reason(_counts(), tiles)
 

@@ -35,13 +35,15 @@ def empty_result_reason(counts: dict[str, int], tiles: TileConfig) -> str:
                 "pipeline found too few consistent matches between any two blocks")
     n_sets = counts["superset_H"]
     if counts["epipolar_kept"] == 0:
+        consensus = (f", and no epipolar geometry is shared by {tiles.min_planes} homographies (the consensus "
+                     "fallback)" if tiles.vote == "consensus" else "")
         if n_sets * (n_sets - 1) <= tiles.t_xi * n_sets:
             return (f"the epipolar vote (Sec. 3.6) cannot keep a match with only {n_sets} tile match sets: it asks "
                     f"for more than t_xi |H| = {tiles.t_xi:g} x {n_sets} agreeing fundamental matrices out of "
-                    f"{n_sets * (n_sets - 1)}; small images (few tiles) or scenes with few planes end here; "
-                    "the base pipeline alone (--method hz+) may still match them")
+                    f"{n_sets * (n_sets - 1)}{consensus}; small images (few tiles) or scenes with few planes end "
+                    "here; the base pipeline alone (--method hz+) may still match them")
         return (f"no match agreed with enough of the fundamental matrices of the {n_sets} tile match sets "
-                "(Sec. 3.6): the planes found do not share one epipolar geometry")
+                f"(Sec. 3.6){consensus}: the planes found do not share one epipolar geometry")
     if counts["ftheta_matches"] == 0:
         return "no tile match set survived plane fusion and the global orientation filter (Sec. 3.7)"
     return (f"the final global DTM (Sec. 3.8) kept none of the {counts['ftheta_matches']} plane matches and "
