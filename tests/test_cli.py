@@ -12,6 +12,7 @@ from slime_match.cli import main
 from slime_match.config import make_config
 from slime_match.errors import caused_by_interrupt
 from slime_match.matcher import Matcher
+from slime_match.result import MatchResult
 from slime_match.slime.refine import global_dtm
 
 WEIGHT_FREE = ["--shape", "baumberg", "--orientation", "gradient", "--descriptor", "rootsift"]
@@ -52,7 +53,9 @@ def test_hz_plus_weight_free(pair, tmp_path, capsys):
 
 
 def test_slime_stages_and_viz(pair, tmp_path, capsys):
-    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--save-stages", "--no-plot")
+    # at its own size (--min-side none): the stages' points, in original px, are then the global DTM's own
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--save-stages", "--no-plot",
+                           "--min-side", "none")
     assert code == 0, err
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["method"] == "slime" and summary["counts"]["matches"] > 0
@@ -201,6 +204,51 @@ def test_max_side_shrinks_and_maps_back(pair, tmp_path, capsys):
     assert summary["config"]["max_side"] == 185
     keypoints = np.load(tmp_path / "matches.npz")["keypoints0"]
     assert len(keypoints) > 20 and keypoints[:, 0].max() > 185 and keypoints.max() < 370
+
+
+def test_min_side_upsamples_and_summary_records_the_sizes(pair, tmp_path, capsys):
+    """The 370 x 250 pair with --min-side 500: matched at 740 x 500 (factor 2), matches in original px; the
+    summary and MatchResult.load record both sizes, the factors and the limits applied."""
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift", "--min-side", "500",
+                           "--max-side", "none", "--no-plot")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["image_sizes"] == {"image0": [370, 250], "image1": [370, 250]}
+    assert summary["working_sizes"] == {"image0": [740, 500], "image1": [740, 500]}
+    assert summary["working_factors"] == {"image0": [2.0, 2.0], "image1": [2.0, 2.0]}
+    assert summary["side_limits"] == {"min_side": 500, "max_side": None}
+    assert summary["config"]["min_side"] == 500 and summary["config"]["max_side"] == 0
+    result = MatchResult.load(tmp_path / "matches.npz")
+    assert result.image_sizes == ((370, 250), (370, 250)) and result.working_sizes == ((740, 500), (740, 500))
+    assert result.working_factors == ((2.0, 2.0), (2.0, 2.0))
+    assert len(result) > 20 and result.keypoints0[:, 0].max() > 250 and result.keypoints0.max() < 370
+    assert result.keypoints1.min() > -0.5
+
+
+def test_working_size_defaults_per_method(pair, tmp_path, capsys):
+    """A base pipeline alone runs at full size by default (auto); Slime's auto limits are 480 / 1200 px."""
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift", "--no-plot")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["working_sizes"] == summary["image_sizes"] and summary["config"]["min_side"] == "auto"
+    assert summary["side_limits"] == {"min_side": None, "max_side": None}
+    assert summary["working_factors"]["image0"] == [1.0, 1.0]
+    from slime_match.cli.commands import build_parser
+    from slime_match.cli.match_options import config_of
+
+    args = build_parser().parse_args(["match", *pair, "-o", str(tmp_path), "--max-side", "none"])
+    assert config_of(args).side_limits() == (480, None)
+
+
+def test_bad_working_size_options(pair, tmp_path, capsys):
+    for bad in (["--min-side", "big"], ["--max-side", "1.5"], ["--min-side", ""]):
+        with pytest.raises(SystemExit):
+            main(["match", *pair, "-o", str(tmp_path), *bad])
+    for bad, message in ((["--min-side", "8"], "min_side must be an integer of at least 32 px"),
+                         (["--min-side", "-480"], "min_side must be an integer of at least 32 px"),
+                         (["--min-side", "900", "--max-side", "600"], "min_side 900 px is larger than max_side 600")):
+        code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift", *bad)
+        assert code == 2 and message in err and not (tmp_path / "matches.npz").exists(), err
 
 
 def test_workers_option_sets_slime_processes_and_keeps_the_matches(pair, tmp_path, capsys, caplog):

@@ -117,3 +117,37 @@ def test_a_registered_base_pipeline_runs_alone_by_its_name():
         assert config.method == config.base.name == "mine-config-test" and config.base.fginn_ratio == 0.9
     finally:
         del PIPELINES["mine-config-test"]
+
+
+def test_working_size_limits():
+    """min_side / max_side: 'auto' is Slime's 480 / 1200 px and off for a base pipeline alone; 0 or None is off;
+    a command-line string is read as px, 'auto' or 'none'."""
+    assert MatchConfig().side_limits() == (480, 1200)
+    assert sm.make_config("slime-fast").side_limits() == (480, 1200)
+    assert sm.make_config("hz+").side_limits() == (None, None)
+    assert sm.make_config("rootsift", min_side=300, max_side=900).side_limits() == (300, 900)
+    assert sm.make_config("slime", min_side=0, max_side=0).side_limits() == (None, None)
+    assert sm.make_config("slime", max_side=1024).side_limits() == (480, 1024)
+    assert sm.make_config("slime", max_side=400).side_limits() == (480, 400)  # the auto min_side gives way
+    assert set_option(MatchConfig(), "min_side", "none").min_side is None
+    assert set_option(MatchConfig(), "min_side", "640").side_limits() == (640, 1200)
+    assert set_option(MatchConfig(), "max_side", "auto").max_side == "auto"
+    recorded = sm.make_config("slime", min_side=600).to_dict()
+    assert MatchConfig.from_dict(json.loads(json.dumps(recorded))).side_limits() == (600, 1200)
+    # a configuration recorded before min_side existed reads back with max_side off and min_side auto
+    old = {key: value for key, value in MatchConfig(max_side=None).to_dict().items() if key != "min_side"}
+    assert MatchConfig.from_dict(old).side_limits() == (480, None)
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    ({"min_side": 8}, "min_side must be an integer of at least 32 px, 0 or None"),
+    ({"max_side": -1}, "max_side must be an integer of at least 32 px"),
+    ({"min_side": "big"}, "min_side must be an integer .* got 'big'"),
+    ({"min_side": 1.5}, "min_side must be an integer"),
+    ({"max_side": True}, "max_side must be an integer"),
+    ({"min_side": 900, "max_side": 600}, "min_side 900 px is larger than max_side 600 px: an image cannot"),
+    ({"min_side": 1500}, r"min_side 1500 px is larger than max_side 1200 px \(auto for slime\)"),
+])
+def test_working_size_limits_bad_values(options, message):
+    with pytest.raises(sm.ConfigError, match=message):
+        sm.make_config("slime", **options)

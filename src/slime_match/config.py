@@ -25,6 +25,10 @@ from .pipelines import PIPELINES, BaseConfig, base_names, unimplemented
 from .slime.pipeline import SlimeConfig
 
 DEVICES = ("auto", "cpu", "cuda")
+# working-size limits (px) of "auto": Slime upsamples images whose shorter side is under 480 px (its 256 px
+# tiles and the Sec. 3.6 vote need several tiles per image) and shrinks those whose longer side is over 1200
+# px (the paper's image sizes; tiles and time grow with the image); a base pipeline alone runs at full size
+AUTO_SIDES: dict[str, tuple[int | None, int | None]] = {"slime": (480, 1200)}
 SHORT_NAMES = {"scales": "slime.blocks.scales", "same_homography": "slime.tiles.same_homography"}
 
 
@@ -48,8 +52,14 @@ class MatchConfig:
         threshold: post-processing RANSAC inlier threshold in px (the paper tests 5, 3, 2, 1).
         seed: seed of every random choice (RANSAC sampling), for reproducible runs.
         device: "auto" (CUDA when available), "cpu" or "cuda".
-        max_side: when set, images whose longest side is larger are shrunk to it (area interpolation)
-            before matching, and the matches are mapped back to original-image pixels (None: as given).
+        min_side: images whose shorter side is smaller are upsampled (Lanczos3) so that it reaches this many px
+            before matching; "auto": the method's default (:data:`AUTO_SIDES`: 480 for Slime, off for a base
+            pipeline alone); 0 or None: off.
+        max_side: images whose longer side is larger are shrunk to this many px (area interpolation) before
+            matching; it wins over ``min_side`` for an elongated image; "auto": the method's default (1200 for
+            Slime, off for a base pipeline alone); 0 or None: off. The two images share one factor when one
+            meets both images' limits, else each gets its own (``resize.pair_factors``); the matches are mapped
+            back to original-image pixels.
     """
 
     method: str = "slime"
@@ -59,7 +69,8 @@ class MatchConfig:
     threshold: float = 3.0
     seed: int = 0
     device: str = "auto"
-    max_side: int | None = None
+    min_side: int | str | None = "auto"
+    max_side: int | str | None = "auto"
 
     def __post_init__(self) -> None:
         self._check_fields()
@@ -68,16 +79,32 @@ class MatchConfig:
         check_choice("method", self.method, methods())
         check_choice("ransac", self.ransac, RANSAC_CHOICES)
         check_choice("device", self.device, DEVICES)
-        check_integer("max_side", self.max_side, MIN_IMAGE_SIDE, optional=True)
+        for name in ("min_side", "max_side"):
+            value = getattr(self, name)
+            if not (value in ("auto", None) or (isinstance(value, numbers.Integral) and not isinstance(value, bool)
+                                                and (value == 0 or value >= MIN_IMAGE_SIDE))):
+                raise ConfigError(f"{name} must be an integer of at least {MIN_IMAGE_SIDE} px, 0 or None (off), or "
+                                  f"'auto' (the method's default), got {value!r}")
         if not (isinstance(self.threshold, numbers.Real) and self.threshold > 0):
             raise ConfigError(f"threshold must be > 0 px, got {self.threshold!r}")
         check_integer("seed", self.seed, 0)
 
+    def side_limits(self) -> tuple[int | None, int | None]:
+        """(min_side, max_side) in px that the matcher applies, "auto" resolved for the method (None: off)."""
+        auto = AUTO_SIDES.get(self.method, (None, None))
+        return tuple(default if value == "auto" else (int(value) if value else None)  # type: ignore[return-value]
+                     for value, default in zip((self.min_side, self.max_side), auto, strict=True))
+
     def validate(self) -> MatchConfig:
         """Check every field again (they may have been set after construction) and what ties them together:
         the base pipeline is registered and can run inside Slime, "merged" detection has a base that
-        detects apart from describing."""
+        detects apart from describing, an explicit ``min_side`` is not above ``max_side``."""
         self._check_fields()
+        low, high = self.side_limits()
+        if low and high and low > high and self.min_side != "auto":  # an auto min_side gives way to max_side
+            raise ConfigError(f"min_side {low} px is larger than max_side {high} px"
+                              f"{' (auto for ' + self.method + ')' if self.max_side == 'auto' else ''}: "
+                              "an image cannot meet both; raise max_side or turn it off (none)")
         self.base.validate()
         self.slime.validate()
         check_choice("base", self.base.name, base_names())

@@ -20,7 +20,7 @@ from .geometry.backends import estimate_geometry
 from .geometry.frames import Frame
 from .io import MIN_IMAGE_SIDE, ImageLike, load_image
 from .pipelines import PIPELINES, make_base_pipeline
-from .resize import resize_image
+from .resize import pair_factors, resize_image
 from .result import MatchResult
 from .slime.level_cache import LevelCache
 from .slime.pipeline import run_slime, stages_to_original
@@ -98,8 +98,10 @@ class Matcher:
         config = self.config
         with timer("load"):
             original0, original1 = load_image(image0), load_image(image1)
-            (array0, frame0), (array1, frame1) = (_working_image(image, config.max_side)
-                                                  for image in (original0, original1))
+            min_side, max_side = config.side_limits()
+            factors = pair_factors(_size(original0), _size(original1), min_side, max_side)
+            (array0, frame0), (array1, frame1) = (_working_image(image, factor, max_side)
+                                                  for image, factor in zip((original0, original1), factors))
         stages = None
         warnings = list(self.warnings)
         decisions: dict[str, str] = {}
@@ -132,13 +134,17 @@ class Matcher:
             "device": str(self.device),
             "image_sizes": {"image0": list(original0.shape[1::-1]), "image1": list(original1.shape[1::-1])},
             "working_sizes": {"image0": list(array0.shape[1::-1]), "image1": list(array1.shape[1::-1])},
+            "working_factors": {"image0": list(frame0.factor), "image1": list(frame1.factor)},
+            "side_limits": {"min_side": min_side, "max_side": max_side},
             "counts": counts,
             "seconds": {**timer.as_dict(), "total": round(time.perf_counter() - start, 4)},
             "warnings": warnings,
         }
         if decisions:
             summary["decisions"] = decisions
-        return MatchResult(xy0, xy1, scores, inliers, kind, model, summary, stages)
+        return MatchResult(xy0, xy1, scores, inliers, kind, model, summary, stages,
+                           image_sizes=(_size(original0), _size(original1)),
+                           working_sizes=(_size(array0), _size(array1)))
 
     def _run_base(self, array0: np.ndarray, array1: np.ndarray, timer: StageTimer):
         pipeline = self.pipeline
@@ -153,14 +159,19 @@ class Matcher:
         return xy0, xy1, matches.scores, counts
 
 
-def _working_image(image: np.ndarray, max_side: int | None) -> tuple[np.ndarray, Frame]:
-    """The (H, W, 3) image shrunk to ``max_side`` (see :func:`resize_image`) and its frame."""
-    working, frame = resize_image(image, max_side)
+def _working_image(image: np.ndarray, factor: float, max_side: int | None) -> tuple[np.ndarray, Frame]:
+    """The (H, W, 3) image resized by ``factor`` (:func:`pair_factors`, :func:`resize_image`) and its frame."""
+    working, frame = resize_image(image, factor=factor)
     height, width = working.shape[:2]
     if min(height, width) < MIN_IMAGE_SIDE:
         raise ImageError(f"a {image.shape[1]}x{image.shape[0]} px image shrunk to max_side {max_side} would be "
                          f"{width}x{height} px, smaller than {MIN_IMAGE_SIDE} px on a side: raise max_side")
     return working, frame
+
+
+def _size(image: np.ndarray) -> tuple[int, int]:
+    """(W, H) of an (H, W[, C]) image."""
+    return int(image.shape[1]), int(image.shape[0])
 
 
 def match(image0: ImageLike, image1: ImageLike, method: str | MatchConfig = "slime", **options: Any) -> MatchResult:
@@ -172,7 +183,7 @@ def match(image0: ImageLike, image1: ImageLike, method: str | MatchConfig = "sli
             "slime-rootsift", "slime-fast", "slime-fine", "hz+", "hz+-upright", "rootsift", "rootsift-upright"...
             or a MatchConfig (from :func:`slime_match.config.make_config`), used as it is.
         **options: flat overrides, e.g. ``descriptor="tfeat"``, ``ransac="fundamental"``, ``threshold=3``,
-            ``base="rootsift"``, ``device="cuda"``, ``seed=1``, ``max_side=1600`` (see
+            ``base="rootsift"``, ``device="cuda"``, ``seed=1``, ``max_side=1600``, ``min_side=0`` (see
             :func:`slime_match.config.make_config`).
 
     Returns:

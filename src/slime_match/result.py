@@ -27,6 +27,9 @@ class MatchResult:
         model: (3, 3) H (image 0 -> 1) or F (x1^T F x0 = 0) from the post-processing RANSAC, or None.
         summary: method, every parameter used, counts, per-stage seconds, warnings.
         stages: optional per-stage arrays (Slime's intermediate sets, for ``slime viz``).
+        image_sizes: ((W, H), (W, H)) px of the original images, or None when unknown.
+        working_sizes: ((w, h), (w, h)) px of the images as matched (``MatchConfig.min_side`` / ``max_side``
+            resize them; the keypoints are mapped back to the original pixels), or None when unknown.
     """
 
     keypoints0: np.ndarray
@@ -37,6 +40,8 @@ class MatchResult:
     model: np.ndarray | None = None
     summary: dict[str, Any] = field(default_factory=dict)
     stages: dict[str, np.ndarray] | None = None
+    image_sizes: tuple[tuple[int, int], tuple[int, int]] | None = None
+    working_sizes: tuple[tuple[int, int], tuple[int, int]] | None = None
 
     def __post_init__(self) -> None:
         self.keypoints0 = np.asarray(self.keypoints0, dtype=np.float64).reshape(-1, 2)
@@ -44,6 +49,13 @@ class MatchResult:
         self.scores = np.asarray(self.scores, dtype=np.float64).reshape(-1)
         if not (len(self.keypoints0) == len(self.keypoints1) == len(self.scores)):
             raise ValueError("keypoints0, keypoints1 and scores must have the same length")
+
+    @property
+    def working_factors(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """((fx, fy), (fx, fy)): working px per original px of each image, per axis (None when unknown)."""
+        if self.image_sizes is None or self.working_sizes is None:
+            return None
+        return tuple((w / W, h / H) for (w, h), (W, H) in zip(self.working_sizes, self.image_sizes, strict=True))
 
     def __len__(self) -> int:
         return int(self.keypoints0.shape[0])
@@ -103,4 +115,13 @@ class MatchResult:
         summary_file = next((f for f in (path.with_suffix(".json"), path.parent / "summary.json") if f.is_file()),
                             None)
         summary = json.loads(summary_file.read_text()) if summary_file else {}
-        return cls(*arrays, summary=summary)
+        sizes = [_pair_sizes(summary.get(key)) for key in ("image_sizes", "working_sizes")]
+        return cls(*arrays, summary=summary, image_sizes=sizes[0], working_sizes=sizes[1])
+
+
+def _pair_sizes(recorded: Any) -> tuple[tuple[int, int], tuple[int, int]] | None:
+    """((W, H), (W, H)) from a summary's ``{"image0": [W, H], "image1": [W, H]}`` (None when absent)."""
+    try:
+        return tuple((int(recorded[k][0]), int(recorded[k][1])) for k in ("image0", "image1"))
+    except (TypeError, KeyError, IndexError, ValueError):
+        return None

@@ -101,6 +101,26 @@ def test_max_side_matches_in_original_pixels():
     assert own.sum() >= 4 and np.median(np.linalg.norm(moved - stages["block_matches_xy1"][own], axis=1)) < 15
 
 
+def test_small_images_are_upsampled_and_matched_in_original_pixels():
+    """graf 1 -> 3 shrunk to 240 x 192 (factor 0.3, its GT homography scaled alike): Slime upsamples both images
+    to 600 x 480 (min_side 480, factor 2.5) and returns matches in the 240 x 192 frames that follow the GT (at
+    240 x 192 itself, min_side 0, its 7 tile match sets cannot pass the epipolar vote: no match)."""
+    folder = require(DATA / "oxford_graf")
+    s = np.diag([0.3, 0.3, 1.0])
+    s[:2, 2] = 0.5 * 0.3 - 0.5  # pixel-centre convention: x_s = (x + 0.5) 0.3 - 0.5
+    h = s @ np.loadtxt(folder / "H1to3p") @ np.linalg.inv(s)
+    a, b = (cv2.resize(load_image(folder / f), (240, 192), interpolation=cv2.INTER_AREA)
+            for f in ("img1.png", "img3.png"))
+    result = Matcher(make_config("slime", scales=(1, 2), **WEIGHT_FREE))(a, b)
+    assert result.image_sizes == ((240, 192), (240, 192)) and result.working_sizes == ((600, 480), (600, 480))
+    assert result.working_factors == ((2.5, 2.5), (2.5, 2.5))
+    assert result.summary["working_factors"]["image1"] == [2.5, 2.5]
+    assert result.summary["side_limits"] == {"min_side": 480, "max_side": 1200}
+    ok = correct_matches_homography(result.keypoints0, result.keypoints1, h, 15 * 0.3)  # 15 px at full size
+    assert ok.sum() >= 1000 and ok.mean() >= 0.9, (int(ok.sum()), ok.mean())  # 5258 of 5476 (0.96) on a CPU
+    assert result.keypoints0.max(axis=0)[0] <= 239.5 and result.keypoints0.max(axis=0)[0] > 200
+
+
 def test_max_side_bad_values(graf_small):
     with pytest.raises(ConfigError, match="max_side"):
         make_config("hz+", max_side=16)
@@ -134,9 +154,10 @@ def test_consensus_recovers_the_geometry_when_the_paper_vote_keeps_nothing(graf_
 
 
 def test_empty_slime_result_says_why(graf_small):
-    """A 120 x 90 crop has one tile: the epipolar vote cannot pass, and the summary says so."""
+    """A 120 x 90 crop matched at its own size (min_side off) has one tile: the epipolar vote cannot pass, and the
+    summary says so."""
     a = graf_small[0][100:190, 100:220]
-    result = Matcher(make_config("slime", scales=(1,), **WEIGHT_FREE))(a, a)
+    result = Matcher(make_config("slime", scales=(1,), min_side=0, **WEIGHT_FREE))(a, a)
     assert len(result) == 0 and result.summary["counts"]["block_planes"] > 0
     assert any("cannot keep a match" in w for w in result.summary["warnings"]), result.summary["warnings"]
 

@@ -39,9 +39,14 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--weights-dir", default=None, help="folder with model weights (else TORCH_HOME cache)")
     parser.add_argument("-v", "--verbose", action="store_true",
                         help="log each stage as it finishes (seconds) and Slime's block and tile layout")
-    parser.add_argument("--max-side", type=int, default=None, metavar="PX",
-                        help="shrink images whose longest side is larger to this many px before matching "
-                             "(matches come back in original pixels); faster and lighter on large photos")
+    parser.add_argument("--min-side", type=parse_side, default=None, metavar="PX|none",
+                        help="upsample (Lanczos3) images whose shorter side is smaller to this many px before "
+                             "matching (default auto: 480 for Slime, whose tiles need it; none for a base "
+                             "pipeline alone); matches come back in original pixels")
+    parser.add_argument("--max-side", type=parse_side, default=None, metavar="PX|none",
+                        help="shrink images whose longer side is larger to this many px before matching "
+                             "(default auto: 1200 for Slime, as the paper's images; none for a base pipeline "
+                             "alone); wins over --min-side; matches come back in original pixels")
     parser.add_argument("--magnification", type=float, default=None,
                         help="patch size over the detected region (default 6 over HarrisZ+ ellipses, 1 over "
                              "Key.Net frames); smaller patches give a weaker base (docs/coverage.md)")
@@ -83,6 +88,20 @@ def positive_int(text: str) -> int:
     return value
 
 
+def parse_side(text: str) -> int | str:
+    """A working-size limit of ``--min-side`` / ``--max-side``: px, ``auto`` or ``none`` (0: off) (an argparse
+    type: other text raises ArgumentTypeError; MatchConfig checks the number)."""
+    lowered = text.strip().lower()
+    if lowered in ("none", "off"):
+        return 0
+    if lowered == "auto":
+        return "auto"
+    try:
+        return int(lowered)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of px, 'auto' or 'none', got {text!r}") from None
+
+
 def parse_scales(text: str) -> tuple[int, ...]:
     """Slime block scales from ``"1,2,3"`` (an argparse type: bad text raises ArgumentTypeError)."""
     try:
@@ -104,7 +123,8 @@ def parse_setting(text: str) -> tuple[str, str]:
 
 def options_of(args: argparse.Namespace) -> dict:
     keys = ("method", "base", "descriptor", "shape", "orientation", "upright", "ransac", "threshold", "seed", "device",
-            "weights_dir", "magnification", "scales", "detection", "tile_test", "max_side")
+            "weights_dir", "magnification", "scales", "detection", "tile_test", "min_side",
+            "max_side")
     return {key: getattr(args, key) for key in keys} | {"workers": getattr(args, "slime_workers", None)}
 
 

@@ -4,7 +4,8 @@ Every frame is the original image resized by ``factor`` per axis and cut at ``or
 integers and the image edges kept: an original point x is ``(x + 0.5) * factor - 0.5 - origin`` in the
 frame. The frames in use:
 
-* the working image: the original shrunk to ``max_side`` (``resize.working_frame``);
+* the working image: the original resized to its working size (``resize.resize_image``: ``min_side``,
+  ``max_side``);
 * a level: Slime's image resized for one block scale (``Block.level_frame``);
 * a block or tile: its crop of the level, ``origin`` its box corner (``Block.frame``).
 

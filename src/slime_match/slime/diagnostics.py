@@ -25,7 +25,8 @@ def tile_count_warning(n_tiles0: int, n_tiles1: int) -> str | None:
         return None
     return (f"{n_tiles0} and {n_tiles1} tiles of 256 px (a 640x480 image has 12): the tiles, the base pipeline run "
             "on them and the tile match sets grow with the image size, so Slime gets slow and memory-hungry; "
-            "--max-side 1600 (max_side=1600) shrinks the images before matching and maps the matches back")
+            "--max-side 1200 (max_side=1200, Slime's default) shrinks the images before matching and maps the "
+            "matches back")
 
 
 def empty_result_reason(counts: dict[str, int], tiles: TileConfig) -> str:
@@ -40,8 +41,8 @@ def empty_result_reason(counts: dict[str, int], tiles: TileConfig) -> str:
         if n_sets * (n_sets - 1) <= tiles.t_xi * n_sets:
             return (f"the epipolar vote (Sec. 3.6) cannot keep a match with only {n_sets} tile match sets: it asks "
                     f"for more than t_xi |H| = {tiles.t_xi:g} x {n_sets} agreeing fundamental matrices out of "
-                    f"{n_sets * (n_sets - 1)}{consensus}; small images (few tiles) or scenes with few planes end "
-                    "here; the base pipeline alone (--method hz+) may still match them")
+                    f"{n_sets * (n_sets - 1)}{consensus}; small images (few tiles: --min-side upsamples them) or "
+                    "scenes with few planes end here; the base pipeline alone (--method hz+) may still match them")
         return (f"no match agreed with enough of the fundamental matrices of the {n_sets} tile match sets "
                 f"(Sec. 3.6){consensus}: the planes found do not share one epipolar geometry")
     if counts["ftheta_matches"] == 0:
