@@ -54,6 +54,8 @@ def test_transfer_error_pools_both_directions_over_the_common_area():
     expected = np.concatenate([forward.ravel(), backward.ravel()]).mean()
     assert P.homography_transfer_error(H_gt @ H_est, H_gt, SHAPE, SHAPE) == pytest.approx(expected)
     assert P.homography_transfer_error(H_est, _translation(500, 0), SHAPE, SHAPE) == math.inf  # no common area
+    # homographies are defined up to scale, sign included
+    assert P.homography_transfer_error(-H_gt @ H_est, -3 * H_gt, SHAPE, SHAPE) == pytest.approx(expected)
 
 
 def test_evd_failures_score_zero():

@@ -52,11 +52,16 @@ def _grid(shape: tuple[int, int], step: int) -> np.ndarray:
     return np.stack([cols.ravel(), rows.ravel()], 1).astype(np.float64)
 
 
-def _inside(points: np.ndarray, w: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """(N,) points in front (w > 0) and on the pixels of an (H, W) image."""
-    x, y = points[:, 0], points[:, 1]
+def _visible(H: np.ndarray, points: np.ndarray, src: tuple[int, int], dst: tuple[int, int]) -> np.ndarray:
+    """(N,) points of an (H, W) image ``src`` that H maps onto the pixels of image ``dst``, on the visible
+    side of the plane (third homogeneous coordinate with the sign it has at the centre of ``src``, as in
+    :func:`~slime_match.eval.metrics.coverage.valid_area_homography`); also returns their images."""
+    y, w = project(H, points)
+    _, wc = project(H, np.array([[(src[1] - 1) / 2, (src[0] - 1) / 2]]))
+    x, v = y[:, 0], y[:, 1]
     with np.errstate(invalid="ignore"):
-        return (w > 0) & (x >= -0.5) & (x < shape[1] - 0.5) & (y >= -0.5) & (y < shape[0] - 0.5)
+        inside = (x >= -0.5) & (x < dst[1] - 0.5) & (v >= -0.5) & (v < dst[0] - 0.5)
+    return inside & (np.sign(w) == np.sign(wc[0])), y
 
 
 def homography_transfer_error(
@@ -67,8 +72,8 @@ def homography_transfer_error(
     step: int = 1,
 ) -> float:
     """EVD error in px: the mean of ``|H_est x - H_gt x|`` over the grid points x of image 0 that H_gt maps
-    inside image 1, and of ``|H_est^-1 y - H_gt^-1 y|`` over the grid points y of image 1 that H_gt^-1 maps
-    inside image 0, pooled (one mean over both sets).
+    inside image 1 (on the visible side of the plane), and of ``|H_est^-1 y - H_gt^-1 y|`` over the grid
+    points y of image 1 that H_gt^-1 maps inside image 0, pooled (one mean over both sets).
 
     Args:
         shape0, shape1: (H, W) image shapes.
@@ -85,8 +90,7 @@ def homography_transfer_error(
         (np.linalg.inv(H_est), np.linalg.inv(H_gt), shape1, shape0),
     ):
         pts = _grid(src, step)
-        gt, w = project(Hb, pts)
-        keep = _inside(gt, w, dst)
+        keep, gt = _visible(Hb, pts, src, dst)
         with np.errstate(invalid="ignore", over="ignore"):
             e = np.linalg.norm(project(Ha, pts[keep])[0] - gt[keep], axis=1)
         errors.append(np.where(np.isnan(e), np.inf, e))
