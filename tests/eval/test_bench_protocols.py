@@ -89,7 +89,7 @@ def test_pairs_without_matches_are_counted_and_listed(hard_run, tmp_path, capsys
 def test_protocol_options():
     cfg = bench.config_from_args(_parse(["planar:x", "--protocol-datasets", "EVD, planar"]))
     assert cfg.protocol_datasets == ["evd", "planar"]
-    assert (cfg.protocol_h_threshold, cfg.protocol_f_threshold, cfg.protocol_max_iters) == (3.0, 1.0, 10000)
+    assert (cfg.protocol_h_threshold, cfg.protocol_f_threshold, cfg.protocol_max_iters) == (3.0, 3.0, 10000)
     cfg = bench.config_from_args(
         _parse(["wxbs:x", "--protocol-datasets", "", "--protocol-f-threshold", "0.5", "--protocol-max-iters", "99"])
     )

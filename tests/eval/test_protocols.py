@@ -76,12 +76,16 @@ def _rectified_matches(n: int = 300, seed: int = 0) -> tuple[np.ndarray, np.ndar
     return x0, x0 - np.c_[rng.uniform(1, 40, n), np.zeros(n)]
 
 
-def test_symmetric_epipolar_distance_is_the_row_offset_on_a_rectified_pair():
+def test_symmetric_epipolar_distance_on_a_rectified_pair():
     x0, x1 = _rectified_matches(5)
     offsets = np.array([0.0, 0.5, 1.5, 2.5, 30.0])
     d = P.symmetric_epipolar_distance(F_RECTIFIED, x0, x1 + np.c_[np.zeros(5), offsets])
     assert d == pytest.approx(offsets)
     assert P.symmetric_epipolar_distance(-7.0 * F_RECTIFIED, x0, x1) == pytest.approx(0.0, abs=1e-12)
+    # image 1 scaled by 2: an offset of d px there is d / 2 px in image 0; the larger one counts
+    F_scaled = np.diag([0.5, 0.5, 1.0]) @ F_RECTIFIED
+    d = P.symmetric_epipolar_distance(F_scaled, x0, 2 * x1 + np.c_[np.zeros(5), offsets])
+    assert d == pytest.approx(offsets)
 
 
 def test_wxbs_recall_one_on_exact_correspondences_of_known_cameras():

@@ -191,7 +191,7 @@ def add_bench_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
         "pairs with GT correspondences), e.g. evd,wxbs,planar; '' = none",
     )
     p.add_argument("--protocol-h-threshold", type=float, default=3.0, help="EVD protocol MAGSAC++ threshold (px)")
-    p.add_argument("--protocol-f-threshold", type=float, default=1.0, help="WxBS protocol MAGSAC++ threshold (px)")
+    p.add_argument("--protocol-f-threshold", type=float, default=3.0, help="WxBS protocol MAGSAC++ threshold (px)")
     p.add_argument("--protocol-max-iters", type=int, default=10000, help="MAGSAC++ iterations of the protocols")
     p.set_defaults(func=cmd_bench)
     return p

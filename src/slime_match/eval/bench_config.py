@@ -54,7 +54,7 @@ class BenchConfig:
     data_root: str | None = None
     protocol_datasets: list[str] = field(default_factory=lambda: ["evd", "wxbs"])
     protocol_h_threshold: float = 3.0
-    protocol_f_threshold: float = 1.0
+    protocol_f_threshold: float = 3.0
     protocol_max_iters: int = 10000
 
     def validate(self) -> BenchConfig:

@@ -4,7 +4,8 @@
   mean transfer error against the GT homography over the common area of the two images, both directions
   (:func:`homography_transfer_error`); pair mAA = mean over t = 1..15 px of [error < t].
 * WxBS (:func:`wxbs_protocol`): fundamental matrix by ``cv2.findFundamentalMat(..., cv2.USAC_MAGSAC)``;
-  each GT correspondence gets its symmetric epipolar distance (:func:`symmetric_epipolar_distance`);
+  each GT correspondence gets its symmetric epipolar distance (:func:`symmetric_epipolar_distance`, the
+  larger of its two point-to-line distances);
   recall at t = fraction of GT correspondences closer than t; pair mAA = mean recall over t = 1..20 px.
 
 A pair without a model (too few matches, or MAGSAC++ finds none) scores mAA 0. OpenCV's USAC seeds its
@@ -42,7 +43,9 @@ def magsac_fundamental(x0: np.ndarray, x1: np.ndarray, threshold: float, max_ite
     None with K < 8 or when no model is found."""
     if len(x0) < 8:
         return None
-    F, _ = cv2.findFundamentalMat(np.float64(x0), np.float64(x1), cv2.USAC_MAGSAC, threshold, CONFIDENCE, max_iters)
+    F, _ = cv2.findFundamentalMat(
+        np.float64(x0), np.float64(x1), cv2.USAC_MAGSAC, threshold, CONFIDENCE, max_iters
+    )
     return None if F is None or F.shape != (3, 3) else F
 
 
@@ -99,8 +102,8 @@ def homography_transfer_error(
 
 
 def symmetric_epipolar_distance(F: np.ndarray, x0: np.ndarray, x1: np.ndarray) -> np.ndarray:
-    """(N,) symmetric epipolar distance in px of (N, 2) correspondences: the mean of the distance from x1 to
-    the line ``F x0`` and from x0 to the line ``F^T x1``."""
+    """(N,) symmetric epipolar distance in px of (N, 2) correspondences: the larger of the distance from x1 to
+    the line ``F x0`` and from x0 to the line ``F^T x1`` (a correspondence is as far as its worse image)."""
     h0 = np.concatenate([x0, np.ones((len(x0), 1))], 1)
     h1 = np.concatenate([x1, np.ones((len(x1), 1))], 1)
     l1, l0 = h0 @ F.T, h1 @ F  # epipolar lines in image 1 and image 0
@@ -108,7 +111,7 @@ def symmetric_epipolar_distance(F: np.ndarray, x0: np.ndarray, x1: np.ndarray) -
     with np.errstate(divide="ignore", invalid="ignore"):
         d1 = algebraic / np.hypot(l1[:, 0], l1[:, 1])
         d0 = algebraic / np.hypot(l0[:, 0], l0[:, 1])
-    return np.nan_to_num((d0 + d1) / 2, nan=np.inf)
+    return np.nan_to_num(np.maximum(d0, d1), nan=np.inf)
 
 
 def evd_protocol(
@@ -126,7 +129,8 @@ def evd_protocol(
     Returns:
         {"maa": mean over :data:`EVD_THRESHOLDS` of [error < t], "error": px (inf without a model)}.
     """
-    error = homography_transfer_error(magsac_homography(x0, x1, threshold, max_iters), H_gt, shape0, shape1, step)
+    H = magsac_homography(x0, x1, threshold, max_iters)
+    error = homography_transfer_error(H, H_gt, shape0, shape1, step)
     return {"maa": float(np.mean([error < t for t in EVD_THRESHOLDS])), "error": error}
 
 
