@@ -89,7 +89,9 @@ def _parse(argv):
 
 def test_files_and_cache(first_run):
     out, stats = first_run
+    protocols = stats.pop("protocols")  # the WxBS pair gets its standard protocol
     assert stats == {"computed": 6, "cached": 0, "pairs": 3, "output": str(out)}
+    assert {(d.split(":")[0], v["protocol"], v["pairs"]) for (d, _), v in protocols.items()} == {("wxbs", "wxbs", 1)}
     for name in ("table.md", "table.csv", "metrics.json", "bar_coverage.png", "bar_accuracy.png"):
         assert (out / name).stat().st_size > 0
     preds = sorted((out / "predictions").rglob("*.npz"))
@@ -160,8 +162,8 @@ def test_table_consistent_with_metrics(first_run):
     assert "| RootSIFT | 3 |" in table and "| RootSIFT | -- |" in table
     assert (
         table.count("Hz+ [descriptor=rootsift, shape=baumberg, orientation=gradient, max_keypoints=600] |")
-        == 1 + 1 + 2 + 1
-    )  # main, original vs rotated, detailed (2 thresholds), time
+        == 1 + 1 + 2 + 1 + 1 + 1
+    )  # main, original vs rotated, detailed (2 thresholds), WxBS protocol, its per-pair header, time
 
 
 def test_rotated_pairs_table(first_run):

@@ -7,7 +7,9 @@ pairs with matches but none correct. The best threshold of a method maximises it
 (planar when there are no non-planar pairs), as in the paper's main table. Pose pairs add the AUC@5/10/20 of
 the max(rotation, translation) angular error, at the essential-matrix RANSAC threshold with the highest AUC
 sum over the group. When the planar pairs include rotated variants, they are also split into original and
-rotated pairs (where upright methods are expected to fail).
+rotated pairs (where upright methods are expected to fail). Pairs scored by a standard protocol
+(:mod:`slime_match.eval.metrics.protocols`) add, per dataset and method, the mean pair mAA, the solved pairs
+(mAA > 0) and the pairs without raw matches.
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ def aggregate(summary: dict[str, Any]) -> dict[str, Any]:
         {"rows": {(group, method, threshold): {column: value, "pairs": n}}, "rotation_rows": the same for
         the planar pairs split into ``ROTATION_GROUPS`` (empty unless both kinds exist), "best": {method: threshold},
         "seconds": {method: {"mean": s, "pairs": n, "code": {code version: pairs}}}, "pose": {(method, threshold): {"auc@5": ...,
-        "essential_threshold": t, "pairs": n}}}
+        "essential_threshold": t, "pairs": n}}, "protocols": :func:`_protocols`}
     """
     cfg = summary["config"]
     thresholds, methods = cfg["thresholds"], list(summary["methods"])
@@ -78,7 +80,28 @@ def aggregate(summary: dict[str, Any]) -> dict[str, Any]:
         "best_group": pick,
         "seconds": seconds,
         "pose": _pose_auc(pairs, methods, thresholds),
+        "protocols": _protocols(pairs, methods),
     }
+
+
+def _protocols(pairs: list[dict], methods: list[str]) -> dict[tuple[str, str], dict[str, Any]]:
+    """{(dataset spec, method): {"protocol": "evd" | "wxbs", "maa": mean pair mAA, "solved": pairs with
+    mAA > 0, "pairs": n, "no_match_pairs": names of the pairs without raw matches}} over the pairs scored
+    by a protocol, in dataset order."""
+    out = {}
+    datasets = dict.fromkeys(p["dataset"] for p in pairs if p.get("protocol"))
+    for dataset in datasets:
+        members = [p for p in pairs if p["dataset"] == dataset and p.get("protocol")]
+        for m in methods:
+            maa = np.array([p["methods"][m]["protocol"]["maa"] for p in members])
+            out[(dataset, m)] = {
+                "protocol": "/".join(dict.fromkeys(p["protocol"] for p in members)),
+                "maa": float(maa.mean()),
+                "solved": int((maa > 0).sum()),
+                "pairs": len(members),
+                "no_match_pairs": [p["name"] for p in members if p["methods"][m]["raw_matches"] == 0],
+            }
+    return out
 
 
 def _rows(

@@ -12,6 +12,9 @@ Per-pair, per-method, per-threshold quantities (stored in ``metrics.json``):
     ``t_perp`` disk), error (accuracy error in px: homography reprojection or epipolar area / diagonal,
     of the model fitted to the kept matches; inf without a model), pose_errors (pose pairs: max angular
     error in degrees per essential-matrix RANSAC threshold, LoFTR protocol).
+Pairs of the ``protocol_datasets`` are also scored by the standard protocol of the hard sets on the raw
+matches (pair field ``protocol``: "evd", "wxbs" or None; per method ``protocol``: pair mAA and the error or
+recall curve, :mod:`slime_match.eval.metrics.protocols`).
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from slime_match.eval.bench_config import BenchConfig
 from slime_match.eval.code_version import code_version
 from slime_match.eval.methods import PAPER_METHODS, make_method, method_label
 from slime_match.eval.predictions import _load_prediction, collect_pairs, load_pair_images, pair_slug, predict
-from slime_match.eval.scoring import evaluate_pair, pair_gt
+from slime_match.eval.scoring import evaluate_pair, evaluate_protocol, pair_gt, pair_protocol
 from slime_match.io import save_json, save_npz
 
 logger = logging.getLogger("slime_match")
@@ -56,7 +59,8 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
 
     Returns:
         {"computed": predictions computed now, "cached": predictions loaded, "pairs": number of pairs,
-        "output": results folder}.
+        "output": results folder, "protocols": the standard-protocol summary of
+        :func:`slime_match.eval.aggregation.aggregate`}.
     """
     from slime_match.eval import figures, report
 
@@ -94,6 +98,8 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
             progress.update()
         gt = pair_gt(pair, images)
         per_method, extras = evaluate_pair(gt, raw, config)
+        protocol = pair_protocol(spec, gt, config)
+        scores = evaluate_protocol(protocol, gt, raw, config) if protocol else {}
         records.append(
             {
                 "name": pair.name,
@@ -101,12 +107,14 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
                 "kind": pair.kind,
                 "group": "planar" if gt.planar else "non-planar",
                 "upright": "@rot" not in pair.name,
+                "protocol": protocol,
                 "methods": {
                     lab: {
                         "seconds": seconds[lab],
                         "code": code[lab],
                         "raw_matches": len(raw[lab][0]),
                         "thresholds": per_method[lab],
+                        **({"protocol": scores[lab]} if lab in scores else {}),
                     }
                     for lab in per_method
                 },
@@ -125,9 +133,9 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
     }
     summary = _finite(summary)
     save_json(out / "metrics.json", summary)
-    report.write_report(out, summary)
+    agg = report.write_report(out, summary)
     logger.info("bench: %d predictions computed, %d loaded from %s", stats["computed"], stats["cached"], out)
-    return {**stats, "pairs": len(pairs), "output": str(out)}
+    return {**stats, "pairs": len(pairs), "output": str(out), "protocols": agg["protocols"]}
 
 
 def _finite(obj: Any) -> Any:
@@ -176,6 +184,15 @@ def add_bench_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p.add_argument("--ransac-backend", default="slime", choices=["slime", "magsac", "poselib"])
     p.add_argument("--map-pairs", type=int, default=2, help="pairs that get coverage/error maps")
     p.add_argument("--data-root", default=None, help="root of the bundled data (default ../shared/data)")
+    p.add_argument(
+        "--protocol-datasets",
+        default="evd,wxbs",
+        help="dataset names whose pairs also get their standard protocol (EVD for homography pairs, WxBS for "
+        "pairs with GT correspondences), e.g. evd,wxbs,planar; '' = none",
+    )
+    p.add_argument("--protocol-h-threshold", type=float, default=3.0, help="EVD protocol MAGSAC++ threshold (px)")
+    p.add_argument("--protocol-f-threshold", type=float, default=3.0, help="WxBS protocol MAGSAC++ threshold (px)")
+    p.add_argument("--protocol-max-iters", type=int, default=10000, help="MAGSAC++ iterations of the protocols")
     p.set_defaults(func=cmd_bench)
     return p
 
@@ -202,6 +219,10 @@ def config_from_args(args: argparse.Namespace) -> BenchConfig:
         ransac_backend=args.ransac_backend,
         map_pairs=args.map_pairs,
         data_root=args.data_root,
+        protocol_datasets=[s.lower() for s in _csv(args.protocol_datasets)],
+        protocol_h_threshold=args.protocol_h_threshold,
+        protocol_f_threshold=args.protocol_f_threshold,
+        protocol_max_iters=args.protocol_max_iters,
     ).validate()
 
 
@@ -212,6 +233,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
         f"{stats['pairs']} pairs: {stats['computed']} predictions computed, {stats['cached']} cached "
         f"-> {stats['output']}/table.md"
     )
+    for (dataset, method), v in stats["protocols"].items():
+        empty = f" ({', '.join(v['no_match_pairs'])})" if v["no_match_pairs"] else ""
+        print(
+            f"{dataset} {method}: {v['protocol'].upper()} mAA {v['maa']:.2f}, {v['solved']}/{v['pairs']} pairs "
+            f"solved, {len(v['no_match_pairs'])} without matches{empty}"
+        )
     return 0
 
 

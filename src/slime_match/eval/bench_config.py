@@ -29,6 +29,12 @@ class BenchConfig:
         homography_step: grid step in px of the planar accuracy error.
         map_pairs: pairs (the first N) that get coverage and error maps.
         data_root: root of the bundled data (None: ``$SLIME_MATCH_DATA`` or ``../shared/data``).
+        protocol_datasets: dataset names (spec before ':') whose pairs are also scored by the standard
+            protocol of their ground truth (:mod:`slime_match.eval.metrics.protocols`): EVD for homography
+            pairs, WxBS for pairs with GT correspondences.
+        protocol_h_threshold: MAGSAC++ threshold in px of the EVD protocol's homography.
+        protocol_f_threshold: MAGSAC++ threshold in px of the WxBS protocol's fundamental matrix.
+        protocol_max_iters: MAGSAC++ iterations of both protocols.
     """
 
     datasets: list[str] = field(default_factory=lambda: ["graf"])
@@ -46,6 +52,10 @@ class BenchConfig:
     homography_step: int = 2
     map_pairs: int = 2
     data_root: str | None = None
+    protocol_datasets: list[str] = field(default_factory=lambda: ["evd", "wxbs"])
+    protocol_h_threshold: float = 3.0
+    protocol_f_threshold: float = 3.0
+    protocol_max_iters: int = 10000
 
     def validate(self) -> BenchConfig:
         if not self.methods:
@@ -62,4 +72,8 @@ class BenchConfig:
             raise ConfigError("no RANSAC thresholds given")
         if self.ransac_backend not in ("slime", "magsac", "poselib"):
             raise ConfigError(f"unknown RANSAC backend {self.ransac_backend!r}")
+        if not (self.protocol_h_threshold > 0 and self.protocol_f_threshold > 0):
+            raise ConfigError("protocol MAGSAC++ thresholds must be > 0 px")
+        if self.protocol_max_iters < 1:
+            raise ConfigError(f"protocol_max_iters must be >= 1, got {self.protocol_max_iters}")
         return self

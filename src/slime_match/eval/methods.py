@@ -61,41 +61,95 @@ class SiftConfig:
     Attributes:
         ratio: keep a match when d1 / d2 < ratio.
         num_features: SIFT keypoints per image (0 = all).
+        rootsift: match RootSIFT descriptors (L1-normalised, square-rooted) instead of SIFT.
+        mutual: also require the match to be the nearest neighbour of its keypoint in image 1.
     """
 
     ratio: float = 0.8
     num_features: int = 0
+    rootsift: bool = False
+    mutual: bool = False
+
+
+@dataclass
+class AsiftConfig(SiftConfig):
+    """OpenCV ASIFT (``cv2.AffineFeature`` over SIFT: SIFT on simulated affine tilts of each image) with
+    RootSIFT descriptors and a one-way (not mutual) ratio test; the fields are those of :class:`SiftConfig`,
+    ``num_features`` counting the SIFT keypoints of each simulated view."""
+
+    ratio: float = 0.85
+    num_features: int = 2000
+    rootsift: bool = True
+
+
+def _root_sift(desc: np.ndarray) -> np.ndarray:
+    """(N, 128) SIFT -> RootSIFT: L1-normalise, square root (unit L2 norm)."""
+    desc = desc.astype(np.float32)
+    return np.sqrt(desc / np.maximum(desc.sum(1, keepdims=True), 1e-12))
+
+
+def ratio_matches(
+    pts0: np.ndarray, d0: np.ndarray, pts1: np.ndarray, d1: np.ndarray, ratio: float, mutual: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Brute-force L2 2-NN matches of (N0, D) descriptors to (N1, D) ones kept by Lowe's ratio test (and the
+    mutual nearest-neighbour check when ``mutual``): xy0 (K, 2), xy1 (K, 2), scores (K,) distance ratios;
+    the empty output when either image has too few descriptors (N0 < 1 or N1 < 2)."""
+    if len(d0) < 1 or len(d1) < 2:
+        return empty_output()
+    bf = cv2.BFMatcher(cv2.NORM_L2)
+    knn = bf.knnMatch(d0, d1, k=2)
+    pairs = np.array([(m[0].queryIdx, m[0].trainIdx, m[0].distance, m[1].distance) for m in knn])
+    i0, i1 = pairs[:, 0].astype(np.int64), pairs[:, 1].astype(np.int64)
+    scores = pairs[:, 2] / np.maximum(pairs[:, 3], 1e-12)
+    keep = scores < ratio
+    if mutual:
+        back = np.array([m.trainIdx for m in bf.match(d1, d0)], np.int64)  # nearest of each image-1 descriptor
+        keep &= back[i1] == i0
+    return pts0[i0[keep]], pts1[i1[keep]], scores[keep]
 
 
 class OpenCVSift:
-    """OpenCV SIFT descriptors, brute-force 2-NN, ratio test; scores are the distance ratios."""
+    """OpenCV SIFT (or RootSIFT) descriptors, brute-force 2-NN, ratio test (optionally mutual); scores are the
+    distance ratios."""
+
+    config_class = SiftConfig
+    what = "opencv-sift"
 
     def __init__(self, **options: Any) -> None:
-        self.config = dataclass_from(SiftConfig, options, "opencv-sift")
+        self.config = dataclass_from(self.config_class, options, self.what)
         if not 0 < self.config.ratio <= 1:
-            raise ConfigError(f"opencv-sift ratio must be in (0, 1], got {self.config.ratio}")
+            raise ConfigError(f"{self.what} ratio must be in (0, 1], got {self.config.ratio}")
+
+    def _detector(self) -> Any:
+        return cv2.SIFT_create(nfeatures=self.config.num_features)
+
+    def _features(self, detector: Any, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 2) keypoints and (N, 128) float32 descriptors of an RGB image (N = 0 without features)."""
+        grey = np.clip(to_grey(image) * 255 + 0.5, 0, 255).astype(np.uint8)
+        keypoints, desc = detector.detectAndCompute(grey, None)
+        if desc is None or len(keypoints) == 0:
+            return np.zeros((0, 2)), np.zeros((0, 128), np.float32)
+        desc = _root_sift(desc) if self.config.rootsift else desc.astype(np.float32)
+        return np.array([k.pt for k in keypoints], np.float64), desc
 
     def __call__(self, image0: np.ndarray, image1: np.ndarray) -> MethodOutput:
         start = time.perf_counter()
-        sift = cv2.SIFT_create(nfeatures=self.config.num_features)
-        kd = [
-            sift.detectAndCompute(np.clip(to_grey(im) * 255 + 0.5, 0, 255).astype(np.uint8), None)
-            for im in (image0, image1)
-        ]
-        (k0, d0), (k1, d1) = kd
-        if d0 is None or d1 is None or len(d0) < 1 or len(d1) < 2:
-            xy0, xy1, scores = empty_output()
-        else:
-            knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(d0, d1, k=2)
-            pairs = np.array([(m[0].queryIdx, m[0].trainIdx, m[0].distance, m[1].distance) for m in knn])
-            ratio = pairs[:, 2] / np.maximum(pairs[:, 3], 1e-12)
-            keep = ratio < self.config.ratio
-            pts0 = np.array([k.pt for k in k0], np.float64)
-            pts1 = np.array([k.pt for k in k1], np.float64)
-            xy0 = pts0[pairs[keep, 0].astype(np.int64)]
-            xy1 = pts1[pairs[keep, 1].astype(np.int64)]
-            scores = ratio[keep]
+        detector = self._detector()
+        (p0, d0), (p1, d1) = (self._features(detector, im) for im in (image0, image1))
+        xy0, xy1, scores = ratio_matches(p0, d0, p1, d1, self.config.ratio, self.config.mutual)
         return xy0, xy1, scores, time.perf_counter() - start
+
+
+class OpenCVAsift(OpenCVSift):
+    """OpenCV ASIFT (:class:`AsiftConfig`): ``cv2.AffineFeature`` over ``cv2.SIFT_create(num_features)``,
+    RootSIFT descriptors, brute-force 2-NN, ratio test 0.85 (one-way by default); scores are the distance
+    ratios."""
+
+    config_class = AsiftConfig
+    what = "asift"
+
+    def _detector(self) -> Any:
+        return cv2.AffineFeature_create(cv2.SIFT_create(nfeatures=self.config.num_features))
 
 
 def _preset(preset: str, **fixed: Any) -> Callable[..., MethodFn]:
@@ -118,6 +172,7 @@ REGISTRY: dict[str, tuple[str, Callable[..., MethodFn]]] = {
     "slime-keynet": ("Slimed Key.Net", _preset("slime-keynet")),
     "slime-keynet-upright": ("Slimed Key.Net (upright)", _preset("slime-keynet-upright")),
     "opencv-sift": ("OpenCV SIFT", lambda **o: OpenCVSift(**o)),
+    "asift": ("OpenCV ASIFT", lambda **o: OpenCVAsift(**o)),
     "loftr": ("LoFTR", lambda **o: KorniaLoFTR(**o)),
     "disk-lightglue": ("DISK + LightGlue", lambda **o: KorniaDiskLightGlue(**o)),
 }
@@ -203,6 +258,8 @@ def make_method(spec: str, **defaults: Any) -> MethodFn:
 def _accepted(name: str) -> set[str]:
     if name == "opencv-sift":
         return set(SiftConfig.__dataclass_fields__)
+    if name == "asift":
+        return set(AsiftConfig.__dataclass_fields__)
     if name == "loftr":
         return set(LoFTRConfig.__dataclass_fields__)
     if name == "disk-lightglue":

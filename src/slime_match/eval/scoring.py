@@ -1,6 +1,6 @@
 """Scoring the predictions on one pair: its ground truth, correct matches, the RANSAC post-processing, the coverage
 normalisers and the metrics of every method and threshold (correct matches, precision, coverage, accuracy
-error, pose errors)."""
+error, pose errors), and the standard protocol of the hard sets on the raw matches."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import numpy as np
 from slime_match.eval import metrics as M
 from slime_match.eval.bench_config import BenchConfig
 from slime_match.eval.datasets import Pair
+from slime_match.eval.metrics import protocols as P
 from slime_match.geometry.backends import estimate_geometry
 from slime_match.geometry.fundamental import fundamental_8point
 from slime_match.geometry.homography import homography_dlt
@@ -145,3 +146,34 @@ def evaluate_pair(
             out[label][th] = rec
             extras["kept"][(label, th)] = (k0, k1, ok, model)
     return out, extras
+
+
+def pair_protocol(dataset: str, gt: PairGT, config: BenchConfig) -> str | None:
+    """The standard protocol of a pair of dataset spec ``dataset``: "evd" (homography GT) or "wxbs" (GT
+    correspondences) when the dataset's name is in ``config.protocol_datasets``, else None."""
+    if dataset.split(":")[0].strip().lower() not in config.protocol_datasets:
+        return None
+    if gt.pair.kind == "homography":
+        return "evd"
+    if gt.pair.kind == "fundamental" and gt.pair.corrs is not None:
+        return "wxbs"
+    return None
+
+
+def evaluate_protocol(
+    protocol: str, gt: PairGT, raw: dict[str, tuple[np.ndarray, np.ndarray]], config: BenchConfig
+) -> dict[str, dict[str, Any]]:
+    """Method label -> the protocol's result on its raw matches (:func:`~slime_match.eval.metrics.protocols.
+    evd_protocol` or :func:`~slime_match.eval.metrics.protocols.wxbs_protocol`)."""
+    out = {}
+    for label, (x0, x1) in raw.items():
+        if protocol == "evd":
+            out[label] = P.evd_protocol(
+                x0, x1, gt.pair.H, gt.shape0, gt.shape1, config.protocol_h_threshold, config.protocol_max_iters,
+                config.homography_step,
+            )
+        else:
+            out[label] = P.wxbs_protocol(
+                x0, x1, gt.pair.corrs, config.protocol_f_threshold, config.protocol_max_iters
+            )
+    return out

@@ -9,6 +9,8 @@
   mAA (Eq. acc_formula);
 * pose (:mod:`.pose`): LoFTR protocol (essential matrix RANSAC in normalised coordinates, angular errors,
   AUC@5/10/20).
+* standard protocols of the hard sets (:mod:`.protocols`, imported as a module): EVD homography and WxBS
+  fundamental matrix by OpenCV MAGSAC++ on the raw matches, pair mAA.
 
 All coordinates are pixels ``(x, y)`` with the centre of the top-left pixel at ``(0, 0)``; image shapes are
 ``(height, width)``; masks are boolean, ``valid`` masks True = usable, ``mask0/mask1`` True = excluded.

@@ -1,0 +1,115 @@
+"""Standard protocols of the hard sets (EVD homography, WxBS fundamental) on synthetic data with exact answers."""
+
+import math
+
+import numpy as np
+import pytest
+
+from slime_match.eval.metrics import protocols as P
+from slime_match.geometry.homography import project
+
+from .helpers import H_GT, rot, two_view_points
+
+SHAPE = (120, 160)
+
+
+def _translation(dx: float, dy: float) -> np.ndarray:
+    return np.array([[1.0, 0, dx], [0, 1, dy], [0, 0, 1]])
+
+
+def _exact_matches(H: np.ndarray, n: int = 200, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    x0 = np.random.default_rng(seed).uniform([0, 0], [SHAPE[1], SHAPE[0]], (n, 2))
+    return x0, project(H, x0)[0]
+
+
+def test_identical_homography_scores_one():
+    assert P.homography_transfer_error(H_GT, H_GT, SHAPE, SHAPE) == pytest.approx(0.0, abs=1e-9)
+    x0, x1 = _exact_matches(H_GT)
+    result = P.evd_protocol(x0, x1, H_GT, SHAPE, SHAPE, threshold=3.0, max_iters=1000)
+    assert result["error"] < 1e-3 and result["maa"] == 1.0
+
+
+def test_known_translation_error_and_maa():
+    # GT: shift by (10, 5); estimate: shift by (13.5, 5): every point of both directions is 3.5 px off
+    H_gt, H_est = _translation(10, 5), _translation(13.5, 5)
+    assert P.homography_transfer_error(H_est, H_gt, SHAPE, SHAPE) == pytest.approx(3.5)
+    x0, x1 = _exact_matches(H_est)
+    result = P.evd_protocol(x0, x1, H_gt, SHAPE, SHAPE, threshold=3.0, max_iters=1000)
+    assert result["error"] == pytest.approx(3.5, abs=1e-3)
+    assert result["maa"] == pytest.approx(12 / 15)  # 3.5 < t for t = 4..15
+
+
+def test_transfer_error_pools_both_directions_over_the_common_area():
+    # GT identity, estimate scale 2 about the origin: |H x - x| = |x| forward, |y / 2 - y| = |y| / 2 back
+    H_est = np.diag([2.0, 2.0, 1.0])
+    rows, cols = np.mgrid[0 : SHAPE[0], 0 : SHAPE[1]]
+    norm = np.hypot(cols, rows)
+    assert P.homography_transfer_error(H_est, np.eye(3), SHAPE, SHAPE) == pytest.approx(0.75 * norm.mean())
+    # GT shift by half the width: only the left half of image 0 (and right half of image 1) is common;
+    # estimate scale 2 then the same shift: forward |x| over the left half, backward |y - 80| / 2 over the right
+    half = SHAPE[1] // 2
+    H_gt = _translation(half, 0)
+    forward = norm[:, :half]
+    backward = np.hypot(cols[:, half:] - half, rows[:, half:]) / 2
+    expected = np.concatenate([forward.ravel(), backward.ravel()]).mean()
+    assert P.homography_transfer_error(H_gt @ H_est, H_gt, SHAPE, SHAPE) == pytest.approx(expected)
+    assert P.homography_transfer_error(H_est, _translation(500, 0), SHAPE, SHAPE) == math.inf  # no common area
+    # homographies are defined up to scale, sign included
+    assert P.homography_transfer_error(-H_gt @ H_est, -3 * H_gt, SHAPE, SHAPE) == pytest.approx(expected)
+
+
+def test_evd_failures_score_zero():
+    x0, x1 = _exact_matches(H_GT, n=3)
+    assert P.magsac_homography(x0, x1, 3.0, 1000) is None
+    assert P.evd_protocol(x0, x1, H_GT, SHAPE, SHAPE, 3.0, 1000) == {"maa": 0.0, "error": math.inf}
+    assert P.homography_transfer_error(None, H_GT, SHAPE, SHAPE) == math.inf
+
+
+# a rectified pair (camera 1 = camera 0 shifted along x): epipolar lines are the image rows
+F_RECTIFIED = np.array([[0.0, 0, 0], [0, 0, -1], [0, 1, 0]])
+
+
+def _rectified_matches(n: int = 300, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Exact matches of a rectified pair: random pixels, random disparities, same rows."""
+    rng = np.random.default_rng(seed)
+    x0 = rng.uniform([40, 0], [640, 480], (n, 2))
+    return x0, x0 - np.c_[rng.uniform(1, 40, n), np.zeros(n)]
+
+
+def test_symmetric_epipolar_distance_on_a_rectified_pair():
+    x0, x1 = _rectified_matches(5)
+    offsets = np.array([0.0, 0.5, 1.5, 2.5, 30.0])
+    d = P.symmetric_epipolar_distance(F_RECTIFIED, x0, x1 + np.c_[np.zeros(5), offsets])
+    assert d == pytest.approx(offsets)
+    assert P.symmetric_epipolar_distance(-7.0 * F_RECTIFIED, x0, x1) == pytest.approx(0.0, abs=1e-12)
+    # image 1 scaled by 2: an offset of d px there is d / 2 px in image 0; the larger one counts
+    F_scaled = np.diag([0.5, 0.5, 1.0]) @ F_RECTIFIED
+    d = P.symmetric_epipolar_distance(F_scaled, x0, 2 * x1 + np.c_[np.zeros(5), offsets])
+    assert d == pytest.approx(offsets)
+
+
+def test_wxbs_recall_one_on_exact_correspondences_of_known_cameras():
+    K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+    R, t = rot([0.1, 1, 0.05], 15), np.array([1.0, 0.2, 0.1])
+    x0, x1 = two_view_points(K, K, R, t, np.random.default_rng(1), n=300)
+    corrs = np.hstack(two_view_points(K, K, R, t, np.random.default_rng(2), n=40))
+    result = P.wxbs_protocol(x0, x1, corrs, threshold=1.0, max_iters=1000)
+    assert result["recall"] == [1.0] * 20 and result["maa"] == 1.0
+
+
+def test_wxbs_recall_curve_of_perturbed_correspondences():
+    x0, x1 = _rectified_matches()
+    g0, g1 = _rectified_matches(5, seed=3)
+    offsets = np.array([0.5, 1.5, 2.5, 10.5, 30.0])  # symmetric distances of the GT correspondences
+    corrs = np.c_[g0, g1 + np.c_[np.zeros(5), offsets]]
+    result = P.wxbs_protocol(x0, x1, corrs, threshold=1.0, max_iters=1000)
+    expected = [1 / 5, 2 / 5] + [3 / 5] * 8 + [4 / 5] * 10  # t = 1, 2, 3..10, 11..20
+    assert result["recall"] == pytest.approx(expected)
+    assert result["maa"] == pytest.approx(np.mean(expected))
+
+
+def test_wxbs_too_few_matches_scores_zero():
+    x0, x1 = _rectified_matches(7)
+    corrs = np.c_[x0, x1]
+    assert P.magsac_fundamental(x0, x1, 1.0, 1000) is None
+    assert P.wxbs_protocol(x0, x1, corrs, 1.0, 1000) == {"maa": 0.0, "recall": [0.0] * 20}
