@@ -10,7 +10,7 @@ class ImageError(SlimeMatchError):
 
 
 class WeightsNotFoundError(SlimeMatchError):
-    """Model weights are neither cached nor downloadable; the message names weight-free alternatives."""
+    """Model weights are neither cached nor downloadable; the message names the alternatives."""
 
 
 class ConfigError(SlimeMatchError, ValueError):

@@ -57,7 +57,8 @@ def test_hardnet_checkpoint_loads_from_weights_dir_and_torch_home(hardnet_home, 
 
 @pytest.mark.parametrize(
     ("name", "alternative"),
-    [("hardnet", "--descriptor tfeat or rootsift"), ("affnet", "--shape baumberg"),
+    [("hardnet", "--descriptor hardtfeat or tfeat (other weights) or rootsift (weight-free)"),
+     ("affnet", "--shape baumberg (weight-free)"),
      ("orinet", "--orientation gradient|upright"), ("keynet", "the hz+ or rootsift base pipelines")],
 )
 def test_missing_weights_raise_with_alternatives(tmp_path, no_network, name, alternative):
@@ -71,7 +72,7 @@ def test_auto_descriptor_falls_back_to_rootsift_with_warning(tmp_path, no_networ
     name, warning = resolve_descriptor("auto", tmp_path)
     assert name == "rootsift"
     assert "hardnet, hardtfeat, tfeat unavailable, using rootsift (weight-free) instead" in warning
-    assert "--descriptor tfeat or rootsift" in warning
+    assert "--descriptor hardtfeat or tfeat (other weights) or rootsift (weight-free)" in warning
     assert resolve_descriptor("tfeat", tmp_path) == ("tfeat", None)
     with pytest.raises(WeightsNotFoundError, match="none of hardnet, hardtfeat, tfeat is available"):
         resolve_descriptor("auto", tmp_path, candidates=AUTO_ORDER[:-1])  # a pipeline that needs a network
@@ -126,6 +127,7 @@ def test_auto_descriptor_offline_falls_back_without_waiting_for_retries(tmp_path
     monkeypatch.setattr(kdownload, "load_state_dict_from_url", downloader)
     name, warning = resolve_descriptor("auto", tmp_path)
     assert name == "rootsift"
-    assert "no download host resolves: huggingface.co" in warning and "--descriptor tfeat or rootsift" in warning
+    assert "no download host resolves: huggingface.co" in warning
+    assert "--descriptor hardtfeat or tfeat (other weights) or rootsift (weight-free)" in warning
     with pytest.raises(WeightsNotFoundError, match="must not run"):  # explicit HardNet: kornia's downloader runs
         load_model("hardnet", tmp_path)

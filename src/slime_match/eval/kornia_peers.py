@@ -9,7 +9,7 @@ Weights: the models load kornia's pretrained checkpoints through kornia itself (
 ``DISK.from_pretrained``, ``LightGlue("disk")``), i.e. from the torch-hub cache ``torch.hub.get_dir()/checkpoints``
 (follows ``TORCH_HOME``), downloading them there when the network allows it. When they are neither cached nor
 downloadable, :class:`~slime_match.errors.WeightsNotFoundError` names the model, the cache folder and the
-weight-free alternatives; there is no fallback to another model.
+alternatives; there is no fallback to another model.
 
 Conventions:
     - LoFTR gets the grey image resized so that its longest side is at most ``max_side`` and both sides are

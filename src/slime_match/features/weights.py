@@ -5,7 +5,7 @@ an explicit ``weights_dir`` (a torch-home-like folder with ``hub/checkpoints``, 
 itself). Loading goes through kornia's own downloader with kornia's URLs (HardTFeat, which kornia does not
 list, from the AffNet repository), so a missing file is fetched into that folder when the network allows it
 (e.g. HardNet's ``checkpoint_liberty_with_aug.pth``); when it
-does not, :class:`~slime_match.errors.WeightsNotFoundError` names the weight-free alternatives. There is
+does not, :class:`~slime_match.errors.WeightsNotFoundError` names the alternatives. There is
 no silent fallback.
 """
 
@@ -62,23 +62,24 @@ class _Spec:
 SPECS: dict[str, _Spec] = {
     "hardnet": _Spec(
         "kornia.feature.hardnet", "liberty_aug", "HardNet", "checkpoint_liberty_with_aug.pth", "state_dict", True,
-        "--descriptor tfeat or rootsift",
+        "--descriptor hardtfeat or tfeat (other weights) or rootsift (weight-free)",
     ),
     "tfeat": _Spec(
         "kornia.feature.tfeat", "liberty", "TFeat", "tfeat-liberty.params", None, True,
-        "--descriptor rootsift (or hardnet)",
+        "--descriptor rootsift (weight-free), or hardtfeat / hardnet (other weights)",
     ),
     "hardtfeat": _Spec(
-        "kornia.feature.tfeat", "", "TFeat", "HardTFeat.pth", "state_dict", True, "--descriptor tfeat or rootsift",
+        "kornia.feature.tfeat", "", "TFeat", "HardTFeat.pth", "state_dict", True,
+        "--descriptor tfeat (other weights) or rootsift (weight-free)",
         own_urls=(HARDTFEAT_URL,), convert=hardtfeat_as_tfeat,
     ),
     "affnet": _Spec(
         "kornia.feature.affine_shape", "affnet", "LAFAffNetShapeEstimator", "AffNet.pth", "state_dict", False,
-        "--shape baumberg",
+        "--shape baumberg (weight-free)",
     ),
     "orinet": _Spec(
         "kornia.feature.orientation", "orinet", "OriNet", "OriNet.pth", "state_dict", False,
-        "--orientation gradient|upright",
+        "--orientation gradient|upright (weight-free)",
     ),
     "keynet": _Spec(
         "kornia.feature.keynet", "", "KeyNet", "keynet_pytorch.pth", "state_dict", True,
@@ -181,7 +182,7 @@ def load_state_dict(name: str, weights_dir: str | Path | None = None, retry_offl
 def _not_found(name: str, spec: _Spec, folder: Path, why: str) -> WeightsNotFoundError:
     return WeightsNotFoundError(
         f"{name} weights '{spec.file}' are not in {folder} and could not be downloaded ({why}). Put the file "
-        f"there (or set TORCH_HOME / weights_dir), or use a weight-free alternative: {spec.alternatives}")
+        f"there (or set TORCH_HOME / weights_dir), or use an alternative: {spec.alternatives}")
 
 
 def load_model(name: str, weights_dir: str | Path | None = None, device: str | torch.device = "cpu") -> nn.Module:
