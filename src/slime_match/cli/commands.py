@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from .. import __version__
-from .._runtime import compiled, openmp
+from .._runtime import openmp
 from ..errors import ConfigError, SlimeMatchError, caused_by_interrupt
 from .match_options import add_match_options, add_workers_option, config_of, positive_int
 
@@ -267,9 +267,11 @@ def _check_output_folder(path: str | None) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     openmp.set_default_spin_count()  # before the subcommands load torch
-    compiled.install_notice()
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(argv)  # --help and --version end here, before numba and torch load
+    from .._runtime import compiled
+
+    compiled.install_notice()
     level = logging.DEBUG if args.debug else logging.INFO if getattr(args, "verbose", False) else logging.WARNING
     logging.basicConfig(level=level, format="%(levelname)s: %(message)s")
     logging.getLogger("slime_match").setLevel(level)  # also when the root logger was configured before
