@@ -54,10 +54,10 @@ class MatchConfig:
         device: "auto" (CUDA when available), "cpu" or "cuda".
         min_side: images whose shorter side is smaller are upsampled (Lanczos3) so that it reaches this many px
             before matching; "auto": the method's default (:data:`AUTO_SIDES`: 480 for Slime, off for a base
-            pipeline alone); 0 or None: off.
+            pipeline alone); 0, "none" or None: off (``make_config`` skips None values: pass 0 there).
         max_side: images whose longer side is larger are shrunk to this many px (area interpolation) before
             matching; it wins over ``min_side`` for an elongated image; "auto": the method's default (1200 for
-            Slime, off for a base pipeline alone); 0 or None: off. The two images share one factor when one
+            Slime, off for a base pipeline alone); 0, "none" or None: off. The two images share one factor when one
             meets both images' limits, else each gets its own (``resize.pair_factors``); the matches are mapped
             back to original-image pixels.
     """
