@@ -4,8 +4,8 @@ The paper's vote keeps a match when more than ``t_xi |H|`` of the F_dd' agree wi
 with the number of sets while the support of a correct match grows with the square of the number of
 correct sets, so when most block planes are wrong (wide baselines, appearance change) the correct ones
 cannot pass and the vote keeps nothing. The consensus asks another question: which F_dd' is shared by the
-most planes? Each F_dd' of two sets of different homographies is scored by the distinct homographies whose
-sets agree with it (a majority of their matches within ``t_perp``), then refitted on its supporting matches
+most planes? Each F_dd' of two sets of different homographies is scored by the distinct homographies having a
+set that agrees with it (most of the set's matches within ``t_perp``), then refitted on its supporting matches
 (local optimisation); it is accepted when at least ``min_planes`` homographies support it, and M+ is then its
 inliers among the supporting sets.
 """
@@ -74,7 +74,7 @@ def epipolar_consensus(
     t_perp: float = DEFAULTS.t_perp,
     min_union: int = DEFAULTS.min_union,
     t_ov: float = DEFAULTS.t_ov,
-    min_planes: int = 3,
+    min_planes: int = DEFAULTS.min_planes,
     pairs: PairFundamentals | None = None,
 ) -> Consensus:
     """The F_dd' supported by the most distinct homographies among the superset ``sets``, refitted.

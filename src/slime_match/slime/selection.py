@@ -80,7 +80,7 @@ def select_planes(table: MatchTable, expanded: sp.csr_matrix, tiles0: list[Block
                           n_planes)
 
 
-def _homographies(table: MatchTable, sets: TileSets, keep: np.ndarray, t_ov: float) -> int:
+def _homographies(sets: TileSets, keep: np.ndarray, t_ov: float) -> int:
     """Distinct homographies (``plane_groups``) among the sets of ``sets`` holding a match of ``keep`` (M,)."""
     held = sets.restrict(keep)
     held = held.subset(np.flatnonzero(np.diff(held.indptr) > 0))
@@ -93,14 +93,15 @@ def _epipolar_selection(table: MatchTable, superset: TileSets, config: TileConfi
     pairs = PairFundamentals(table, superset) if len(superset) >= 2 else None
     keep = epipolar_consistency(table, superset, t_perp=config.t_perp, t_xi=config.t_xi, min_union=config.min_union,
                                 chunk=config.chunk, threads=threads, pairs=pairs)
-    n_planes = _homographies(table, superset, keep, config.t_ov)
+    n_planes = _homographies(superset, keep, config.t_ov)
+    kept = f"the paper's vote kept {int(keep.sum())} matches on {n_planes} homographies"
     if config.vote == "paper":
-        return keep, "paper", "the paper's vote (vote=paper)", n_planes
+        return keep, "paper", f"{kept} (vote=paper)", n_planes
     if keep.sum() >= config.min_union:
-        return keep, "paper", f"the paper's vote kept {int(keep.sum())} matches on {n_planes} homographies", n_planes
+        return keep, "paper", kept, n_planes
     found = epipolar_consensus(table, superset, t_perp=config.t_perp, min_union=config.min_union, t_ov=config.t_ov,
                                min_planes=config.min_planes, pairs=pairs)
-    weak = f"the paper's vote kept {int(keep.sum())} matches (fewer than min_union={config.min_union})"
+    weak = f"{kept} (fewer than min_union={config.min_union})"
     if not found.keep.any():
         return keep, "paper", f"{weak}, and no epipolar geometry has {config.min_planes} homographies", n_planes
     chosen = f"the largest consistent geometry has {found.planes} homographies, {int(found.keep.sum())} matches"
