@@ -1,4 +1,4 @@
-"""Speed and memory of the base pipeline Hz+, stage by stage, next to OpenCV SIFT and the issue's targets.
+"""Speed and memory of the base pipeline Hz+, stage by stage, next to OpenCV SIFT and the speed targets.
 
     python benchmarks/bench_base.py [--device cuda] [--out results/bench_base.json] [--threads 2,1] [--repeat 2]
 
@@ -392,7 +392,7 @@ def _print_run(threads: int, run: dict) -> None:
         print(
             f"OpenCV SIFT {name}: {r['seconds']:.3f} s for {r['images']} image(s), features {r['features']}"
         )
-    print("patches/s at batch 4000 (ours | kornia module | issue target at 2 threads):")
+    print("patches/s at batch 4000 (ours | kornia module | target at 2 threads):")
     for name, r in run["throughput"].items():
         target = t2.get(name, "-")
         print(

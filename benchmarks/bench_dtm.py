@@ -4,7 +4,7 @@
     python benchmarks/bench_dtm.py [CALLS] [--out results/bench_dtm.json] [--repeat 1] [--every 1]
                                    [--baseline GIT_REV]
 
-CALLS (default /tmp/dtm_calls_slime.pkl) is a pickled list of dicts, one per ``dtm_filter`` call: its
+CALLS (default results/dtm_calls_slime.pkl) is a pickled list of dicts, one per ``dtm_filter`` call: its
 arguments xy0, xy1, scores, size0, size1, unmatched0, unmatched1 (default config) and the recorded outputs
 keep, removed_at, restored. ``--record`` writes it: every call of one weight-free Slime run on graf
 1 -> 3 at 640x480 (``bench_slime.py``'s pair), in this process (669 calls at the time of writing). ``--every N`` takes every N-th call. A round runs all calls once, in this
@@ -126,7 +126,7 @@ def run_round(module: ModuleType, calls: list[dict]) -> tuple[float, float, bool
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("calls", nargs="?", type=Path, default=Path("/tmp/dtm_calls_slime.pkl"))
+    parser.add_argument("calls", nargs="?", type=Path, default=Path("results/dtm_calls_slime.pkl"))
     parser.add_argument("--record", action="store_true", help="write CALLS from one Slime run and exit")
     parser.add_argument("--out", type=Path)
     parser.add_argument("--repeat", type=int, default=1)

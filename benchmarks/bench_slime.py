@@ -345,7 +345,7 @@ def main(argv: list[str] | None = None) -> dict:
             runs[f"fast (block scales 1, 2) {label} 640x480"] = bench_slime_vs_base(
                 f"Slime fast (block scales 1, 2) {label} 640x480", options, pairs["640x480"], args.device,
                 TARGETS_S[key], preset="slime-fast")
-    if not args.skip_fine:  # the targets are for the paper's three scales: none applies here
+    if not args.skip_fine:  # the speed targets are for the paper's three scales: none applies here
         for label, options in ((learned, {"descriptor": args.descriptor}), ("weight-free", WEIGHT_FREE)):
             runs[f"fine (block scales 1-4) {label} 640x480"] = bench_slime_vs_base(
                 f"Slime fine (block scales 1-4) {label} 640x480", options, pairs["640x480"], args.device, None,

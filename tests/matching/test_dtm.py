@@ -147,18 +147,22 @@ def test_config_validation():
         dtm_filter(np.zeros((2, 2)), np.zeros((1, 2)), [0.0], (10, 10), (10, 10))
 
 
-def test_real_pair_blob_then_dtm(data_dir):
-    """Oxford graf 1-2 with OpenCV RootSIFT: DTM keeps the correct Blob candidates and drops the rest."""
-    folder = require(data_dir / "oxford_graf")
-    hom = np.loadtxt(folder / "H1to2p")
+def _graf_candidates(folder, k: int):
+    """OpenCV RootSIFT (3000 a side) Blob candidates of graf 1 -> k: xy0, xy1 (N, 2), sizes, candidates, GT."""
     feats = []
-    for name in ("img1.png", "img2.png"):
+    for name in ("img1.png", f"img{k}.png"):
         img = cv2.imread(str(folder / name), cv2.IMREAD_GRAYSCALE)
         kp, desc = cv2.SIFT_create(3000).detectAndCompute(img, None)
         desc = np.sqrt(desc / np.maximum(desc.sum(1, keepdims=True), 1e-9))
         feats.append((np.array([p.pt for p in kp]), torch.from_numpy(desc).float(), img.shape))
     (xy0, d0, size0), (xy1, d1, size1) = feats
     cand = blob_match(d0, d1, torch.from_numpy(xy0), torch.from_numpy(xy1))
+    return xy0, xy1, size0, size1, cand, np.loadtxt(folder / f"H1to{k}p")
+
+
+def test_real_pair_blob_then_dtm(data_dir):
+    """Oxford graf 1-2 with OpenCV RootSIFT: DTM keeps the correct Blob candidates and drops the rest."""
+    xy0, xy1, size0, size1, cand, hom = _graf_candidates(require(data_dir / "oxford_graf"), 2)
     proj = np.c_[xy0[cand.idx0], np.ones(len(cand))] @ hom.T
     correct = np.linalg.norm(proj[:, :2] / proj[:, 2:] - xy1[cand.idx1], axis=1) < 3
     unmatched = [np.delete(xy, np.unique(idx), 0) for xy, idx in ((xy0, cand.idx0), (xy1, cand.idx1))]
@@ -171,16 +175,7 @@ def test_real_pair_blob_then_dtm(data_dir):
 def test_real_pair_low_inlier_ratio_does_not_collapse(data_dir):
     """Oxford graf 1-4 (strong viewpoint change): < 10% of the Blob candidates are correct; DTM must keep
     most of them (it used to collapse to 2 matches) with a high precision."""
-    folder = require(data_dir / "oxford_graf")
-    hom = np.loadtxt(folder / "H1to4p")
-    feats = []
-    for name in ("img1.png", "img4.png"):
-        img = cv2.imread(str(folder / name), cv2.IMREAD_GRAYSCALE)
-        kp, desc = cv2.SIFT_create(3000).detectAndCompute(img, None)
-        desc = np.sqrt(desc / np.maximum(desc.sum(1, keepdims=True), 1e-9))
-        feats.append((np.array([p.pt for p in kp]), torch.from_numpy(desc).float(), img.shape))
-    (xy0, d0, size0), (xy1, d1, size1) = feats
-    cand = blob_match(d0, d1, torch.from_numpy(xy0), torch.from_numpy(xy1))
+    xy0, xy1, size0, size1, cand, hom = _graf_candidates(require(data_dir / "oxford_graf"), 4)
     correct = correct_matches_homography(xy0[cand.idx0], xy1[cand.idx1], hom, t=15)
     unmatched = [np.delete(xy, np.unique(idx), 0) for xy, idx in ((xy0, cand.idx0), (xy1, cand.idx1))]
     res = dtm_filter(xy0[cand.idx0], xy1[cand.idx1], cand.scores, size0, size1, *unmatched)
