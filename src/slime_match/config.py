@@ -23,13 +23,15 @@ from .geometry.backends import RANSAC_CHOICES
 from .io import MIN_IMAGE_SIDE
 from .pipelines import PIPELINES, BaseConfig, base_names, unimplemented
 from .slime.pipeline import SlimeConfig
+from .views import ViewConfig
 
 DEVICES = ("auto", "cpu", "cuda")
 # working-size limits (px) of "auto": Slime upsamples images whose shorter side is under 480 px (its 256 px
 # tiles and the Sec. 3.6 vote need several tiles per image) and shrinks those whose longer side is over 1200
 # px (the paper's image sizes; tiles and time grow with the image); a base pipeline alone runs at full size
 AUTO_SIDES: dict[str, tuple[int | None, int | None]] = {"slime": (480, 1200)}
-SHORT_NAMES = {"scales": "slime.blocks.scales", "same_homography": "slime.tiles.same_homography"}
+SHORT_NAMES = {"scales": "slime.blocks.scales", "same_homography": "slime.tiles.same_homography",
+               "views": "views.mode"}
 
 
 def methods() -> tuple[str, ...]:
@@ -60,6 +62,9 @@ class MatchConfig:
             Slime, off for a base pipeline alone); 0, "none" or None: off. The two images share one factor when one
             meets both images' limits, else each gets its own (``resize.pair_factors``); the matches are mapped
             back to original-image pixels.
+        views: simulated views of image 0 for extreme viewpoints (ASIFT tilts, :class:`~slime_match.views.
+            ViewConfig`): "auto" (default) only when the plain run finds too little consistent geometry,
+            "always", "off"; for Slime and for a base pipeline alone.
     """
 
     method: str = "slime"
@@ -71,6 +76,7 @@ class MatchConfig:
     device: str = "auto"
     min_side: int | str | None = "auto"
     max_side: int | str | None = "auto"
+    views: ViewConfig = field(default_factory=ViewConfig)
 
     def __post_init__(self) -> None:
         self._check_fields()
@@ -107,6 +113,7 @@ class MatchConfig:
                               "an image cannot meet both; raise max_side or turn it off (none)")
         self.base.validate()
         self.slime.validate()
+        self.views.validate()
         check_choice("base", self.base.name, base_names())
         if self.method != "slime" and self.base.name != self.method:
             raise ConfigError(f"method {self.method!r} runs the {self.method} pipeline alone, but base.name is "

@@ -20,6 +20,7 @@ from .geometry.backends import estimate_geometry
 from .geometry.frames import Frame
 from .io import MIN_IMAGE_SIDE, ImageLike, load_image
 from .pipelines import PIPELINES, make_base_pipeline
+from .pipelines.view_matching import match_views
 from .resize import pair_factors, resize_image
 from .result import MatchResult
 from .slime.level_cache import LevelCache
@@ -107,12 +108,13 @@ class Matcher:
         decisions: dict[str, str] = {}
         if config.method == "slime":
             output = run_slime(self.pipeline, array0, array1, config.slime, timer, seed=config.seed,
-                               level_cache=self.level_cache)
+                               level_cache=self.level_cache, views=config.views)
             xy0, xy1, scores, counts, stages = output.xy0, output.xy1, output.scores, output.counts, output.stages
             warnings += output.warnings
             decisions = output.decisions
         else:
-            xy0, xy1, scores, counts = self._run_base(array0, array1, timer)
+            xy0, xy1, scores, counts, views = self._run_base(array0, array1, timer)
+            decisions = {"views": views.as_dict()}
         if (frame0, frame1) != (Frame(), Frame()):
             xy0, xy1 = frame0.to_original(xy0), frame1.to_original(xy1)
             if stages is not None:
@@ -155,8 +157,11 @@ class Matcher:
             matches = pipeline.match(features0, features1, array0.shape[:2], array1.shape[:2])
         xy0 = features0.xy.detach().cpu().numpy().astype(np.float64)[matches.idx0]
         xy1 = features1.xy.detach().cpu().numpy().astype(np.float64)[matches.idx1]
-        counts = {"keypoints0": len(features0), "keypoints1": len(features1)}
-        return xy0, xy1, matches.scores, counts
+        with timer("views"):
+            xy0, xy1, scores, views = match_views(pipeline, array0, array1, features1, xy0, xy1, matches.scores,
+                                                  self.config.views, self.config.seed)
+        counts = {"keypoints0": len(features0), "keypoints1": len(features1), "views": views.views}
+        return xy0, xy1, scores, counts, views
 
 
 def _working_image(image: np.ndarray, factor: float, max_side: int | None) -> tuple[np.ndarray, Frame]:

@@ -17,6 +17,7 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
     from ..pipelines import base_names
     from ..slime.levels import DETECTIONS
     from ..slime.refine import TILE_TESTS
+    from ..views import VIEW_MODES
 
     parser.add_argument("--method", default=None, choices=methods(),
                         help="Slime (default) or a base pipeline alone")
@@ -62,6 +63,10 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
                         help="Slime: which full-resolution tile matches to keep: 'plane' (the default: fits the "
                              "plane's homography over the whole tile pair, more coverage), 'flow' (the paper's: "
                              "near a match of the selected planes)")
+    parser.add_argument("--views", default=None, choices=VIEW_MODES,
+                        help="simulated views of image 0 for extreme viewpoints (ASIFT tilts 2 then 4, for Slime "
+                             "and a base pipeline alone): 'auto' (default) only when the plain run finds too "
+                             "little consistent geometry, 'always', 'off'; summary.json records the views tried")
     parser.add_argument("--set", dest="settings", action="append", default=[], type=parse_setting,
                         metavar="OPTION=VALUE",
                         help="any option by its dotted path, e.g. slime.tiles.t_xi=12 or base.blob.shortlist_k=5 "
@@ -124,7 +129,7 @@ def parse_setting(text: str) -> tuple[str, str]:
 def options_of(args: argparse.Namespace) -> dict:
     keys = ("method", "base", "descriptor", "shape", "orientation", "upright", "ransac", "threshold", "seed", "device",
             "weights_dir", "magnification", "scales", "detection", "tile_test", "min_side",
-            "max_side")
+            "max_side", "views")
     return {key: getattr(args, key) for key in keys} | {"workers": getattr(args, "slime_workers", None)}
 
 

@@ -19,6 +19,8 @@ recall curve, :mod:`slime_match.eval.metrics.protocols`).
 
 from __future__ import annotations
 
+import json
+
 import argparse
 import logging
 import math
@@ -78,7 +80,7 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
     )
     for index, (spec, pair) in enumerate(pairs):
         images = load_pair_images(pair)
-        raw, seconds, code = {}, {}, {}
+        raw, seconds, code, views = {}, {}, {}, {}
         for mspec in config.methods:
             label = labels[mspec]
             path = out / "predictions" / label / f"{pair_slug(pair.name)}.npz"
@@ -95,6 +97,7 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
             raw[label] = (pred["keypoints0"], pred["keypoints1"])
             seconds[label] = float(pred["seconds"])
             code[label] = str(pred["code"])
+            views[label] = json.loads(str(pred["decisions"])).get("views")
             progress.update()
         gt = pair_gt(pair, images)
         per_method, extras = evaluate_pair(gt, raw, config)
@@ -113,6 +116,7 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
                         "seconds": seconds[lab],
                         "code": code[lab],
                         "raw_matches": len(raw[lab][0]),
+                        **({"views": views[lab]} if views.get(lab) else {}),
                         "thresholds": per_method[lab],
                         **({"protocol": scores[lab]} if lab in scores else {}),
                     }

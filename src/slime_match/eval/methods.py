@@ -42,6 +42,7 @@ class MatcherMethod:
         options.setdefault("ransac", "none")
         self.config = make_config(preset, **options)  # validates option names now
         self._matcher = None
+        self.last_decisions: dict[str, Any] = {}  # the adaptive choices of the last pair (summary "decisions")
 
     def __call__(self, image0: np.ndarray, image1: np.ndarray) -> MethodOutput:
         from slime_match.matcher import Matcher
@@ -51,6 +52,7 @@ class MatcherMethod:
         start = time.perf_counter()
         result = self._matcher(image0, image1)
         seconds = time.perf_counter() - start
+        self.last_decisions = result.summary.get("decisions", {})
         return result.keypoints0, result.keypoints1, result.scores, seconds
 
 

@@ -3,6 +3,8 @@ rotated variants, images, one prediction in the original frame, and a saved pred
 
 from __future__ import annotations
 
+import json
+
 import re
 from dataclasses import replace
 from pathlib import Path
@@ -43,10 +45,12 @@ def load_pair_images(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
 
 def predict(method, pair: Pair, images: tuple[np.ndarray, np.ndarray]) -> dict[str, np.ndarray]:
     """Run a method on a pair under the protocol resize; keypoints come back in the original frame, with the
-    matching seconds and the :func:`code_version` that computed them."""
+    matching seconds, the :func:`code_version` that computed them and, for the package's methods, the adaptive
+    choices of the run (``decisions``: the vote, the views tried; JSON text)."""
     (im0, frame0), (im1, frame1) = (resize_image(im, pair.max_side, pair.size) for im in images)
     xy0, xy1, scores, seconds = method(im0, im1)
     return {
+        "decisions": np.str_(json.dumps(getattr(method, "last_decisions", {}))),
         "keypoints0": frame0.to_original(np.asarray(xy0, np.float64).reshape(-1, 2)),
         "keypoints1": frame1.to_original(np.asarray(xy1, np.float64).reshape(-1, 2)),
         "scores": np.asarray(scores, np.float64).reshape(-1),
@@ -60,4 +64,5 @@ _PREDICTION_ARRAYS = ("keypoints0", "keypoints1", "scores", "seconds")
 
 def _load_prediction(path: Path) -> dict[str, np.ndarray]:
     data = load_npz(path, "saved prediction", _PREDICTION_ARRAYS, hint="; delete it to recompute")
-    return {k: data[k] for k in _PREDICTION_ARRAYS} | {"code": data.get("code", np.str_(UNKNOWN))}
+    return {k: data[k] for k in _PREDICTION_ARRAYS} | {"code": data.get("code", np.str_(UNKNOWN)),
+                                                      "decisions": data.get("decisions", np.str_("{}"))}

@@ -130,16 +130,24 @@ def _protocol_tables(summary: dict[str, Any], agg: dict[str, Any]) -> list[str]:
         )
     lines += [
         "",
-        "### Standard protocols per pair (pair mAA)",
+        "### Standard protocols per pair (pair mAA; the tilts of the simulated views a run added)",
         "",
         "| Pair | Protocol | " + " | ".join(title[m] for m in methods) + " |",
         "| --- | --- | " + " | ".join("---" for _ in methods) + " |",
     ]
     for p in summary["pairs"]:
         if p.get("protocol"):
-            cells = [f"{p['methods'][m]['protocol']['maa']:.2f}" for m in methods]
+            cells = [f"{p['methods'][m]['protocol']['maa']:.2f}{_views_note(p['methods'][m].get('views'))}"
+                     for m in methods]
             lines.append(f"| {p['name']} | {p['protocol'].upper()} | " + " | ".join(cells) + " |")
     return lines
+
+
+def _views_note(views: dict[str, Any] | None) -> str:
+    """" (views: tilt 2, 4)" when a run added simulated views, else ""."""
+    if not views or not views.get("views"):
+        return ""
+    return f" (views: tilt {', '.join(f'{t:g}' for t in views['tilts'])})"
 
 
 def csv_table(summary: dict[str, Any], agg: dict[str, Any]) -> str:

@@ -10,7 +10,7 @@ the fixed-orientation descriptors once per (level, bin) for the blocks that a re
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -54,6 +54,14 @@ class BlockPairMatches:
     scale0: np.ndarray
     scale1: np.ndarray
     scores: np.ndarray
+
+    def joined(self, other: BlockPairMatches, block_offset: int) -> BlockPairMatches:
+        """These planes followed by ``other``'s, whose image-0 block indices are shifted by ``block_offset``."""
+        pairs = np.concatenate([self.pairs, other.pairs + np.array([block_offset, 0])])
+        return BlockPairMatches(pairs, np.concatenate([self.H, other.H]), np.concatenate([self.theta, other.theta]),
+                                np.concatenate([self.match_pair, other.match_pair + len(self.pairs)]),
+                                *(np.concatenate([getattr(self, k), getattr(other, k)])
+                                  for k in ("xy0", "xy1", "scale0", "scale1", "scores")))
 
 
 class _BlockSide:
@@ -204,11 +212,17 @@ def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks
     s1 = stack_matrices([blocks1[i].level_frame for i in bpm.pairs[:, 1]])
     h = np.linalg.inv(s1) @ bpm.H @ s0
     pair = bpm.match_pair
-    f0 = np.sqrt(s0[:, 0, 0] * s0[:, 1, 1])[pair]
-    f1 = np.sqrt(s1[:, 0, 0] * s1[:, 1, 1])[pair]
-    xy0 = (bpm.xy0 + 0.5) / np.stack([s0[:, 0, 0], s0[:, 1, 1]], 1)[pair] - 0.5
-    xy1 = (bpm.xy1 + 0.5) / np.stack([s1[:, 0, 0], s1[:, 1, 1]], 1)[pair] - 0.5
-    table = MatchTable(xy0, xy1, np.zeros(len(pair)), bpm.theta[pair], bpm.scale0 / f0, bpm.scale1 / f1,
+    xy0, xy1 = np.zeros_like(bpm.xy0), np.zeros_like(bpm.xy1)
+    for plane, (w0, w1) in enumerate(bpm.pairs):  # level px -> original px, each plane through its blocks' frames
+        rows = pair == plane
+        xy0[rows] = blocks0[w0].level_frame.to_original(bpm.xy0[rows])
+        xy1[rows] = blocks1[w1].level_frame.to_original(bpm.xy1[rows])
+    # The level's upright patch (theta = 0 in image 0) seen in the original: the direction of its x axis there
+    # (a simulated view's affine map turns it; a plain level does not), and the patch scales by the frames' areas.
+    back0 = np.linalg.inv(s0)[pair]
+    angle0 = np.arctan2(back0[:, 1, 0], back0[:, 0, 0])
+    f0, f1 = (np.sqrt(np.abs(s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] * s[:, 1, 0]))[pair] for s in (s0, s1))
+    table = MatchTable(xy0, xy1, angle0, bpm.theta[pair], bpm.scale0 / f0, bpm.scale1 / f1,
                        np.ones(len(pair)), pair, bpm.scores)
     side = np.ones(len(h))
     for plane in range(len(h)):  # one small projection per plane
@@ -236,6 +250,16 @@ class BlockPlanes:
     H: np.ndarray
     side: np.ndarray
     counts: dict[str, int]
+
+    def joined(self, other: BlockPlanes, block_offset: int) -> BlockPlanes:
+        """These planes followed by ``other``'s (found with image-0 blocks numbered from ``block_offset``, e.g.
+        a simulated view's), in one deduplicated match table; the counts add up."""
+        raw = MatchTable.concatenate([self.raw, replace(other.raw, source=other.raw.source + len(self.H))])
+        table, _ = deduplicate(raw)
+        counts = {k: self.counts.get(k, 0) + other.counts.get(k, 0) for k in {*self.counts, *other.counts}}
+        counts.update(block_matches=len(raw), block_matches_unique=len(table))
+        return BlockPlanes(self.level_matches.joined(other.level_matches, block_offset), raw, table,
+                           np.concatenate([self.H, other.H]), np.concatenate([self.side, other.side]), counts)
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The planes and the match table, for ``--save-stages``."""

@@ -41,17 +41,20 @@ import scipy.sparse as sp
 from slime_match.errors import ConfigError
 from slime_match.features.image_ops import scaled_size
 from slime_match.geometry.frames import Frame
+from slime_match.views import View
 
 __all__ = [
     "Block",
     "BlockConfig",
     "make_blocks",
     "make_tiles",
+    "make_view_blocks",
     "points_in_blocks",
 ]
 
 
 BORDER_MARGIN = 2.0  # px: keypoints a block crop's detector finds this close to the image border are dropped
+VIEW_BLOCK_INSIDE = 0.5  # a simulated view's block is kept when this much of its core shows the image
 
 
 @dataclass
@@ -102,7 +105,10 @@ class Block:
         box: (x0, y0, x1, y1) half-open pixel-index window of the block in the scaled image, padding
             included (may reach ``-padding`` and ``W_s + padding``: that part is zero padding).
         core: (x0, y0, x1, y1) half-open pixel-index window where keypoints belong to the block.
-        original_size: (W, H) size of the original image in px.
+        original_size: (W, H) size of the original image in px (of a view: the view image's size).
+        view: None, or the simulated view (``views.View``) whose image the block's level resizes: the block's
+            frames then start with the view's affine map, and its keypoints must lie inside the original
+            image (the rest of a view is the warp's reflected border).
     """
 
     scale_index: int
@@ -113,6 +119,7 @@ class Block:
     box: tuple[int, int, int, int]
     core: tuple[int, int, int, int]
     original_size: tuple[int, int]
+    view: View | None = None
 
     @property
     def fx(self) -> float:
@@ -132,12 +139,13 @@ class Block:
     @property
     def level_frame(self) -> Frame:
         """The frame of the whole scaled image (the block's level)."""
-        return Frame((self.fx, self.fy))
+        return Frame((self.fx, self.fy), view=self.view.affine if self.view else None)
 
     @property
     def frame(self) -> Frame:
         """The frame of the block image (:meth:`crop`): the level cut at the box corner."""
-        return Frame((self.fx, self.fy), (float(self.box[0]), float(self.box[1])))
+        return Frame((self.fx, self.fy), (float(self.box[0]), float(self.box[1])),
+                     self.view.affine if self.view else None)
 
     def in_core_local(self, xy: np.ndarray) -> np.ndarray:
         """(N,) bool: block-image points (N, 2) that fall in the core (see :func:`points_in_blocks`)."""
@@ -147,10 +155,15 @@ class Block:
 
     def off_border_local(self, xy: np.ndarray, margin: float = BORDER_MARGIN) -> np.ndarray:
         """(N,) bool: block-image points (N, 2) at least ``margin`` px inside the scaled image's border, where a
-        detector sees the crop's zero-filled padding (:meth:`crop`) as an edge."""
-        xy = np.asarray(xy, dtype=np.float64) + np.array(self.box[:2], dtype=np.float64)
+        detector sees the crop's zero-filled padding (:meth:`crop`) as an edge; in a view, also ``margin``
+        original px inside the original image."""
+        local = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        xy = local + np.array(self.box[:2], dtype=np.float64)
         size = np.array(self.scaled_size, dtype=np.float64)
-        return np.all((xy >= margin - 0.5) & (xy <= size - 0.5 - margin), axis=1)
+        inside = np.all((xy >= margin - 0.5) & (xy <= size - 0.5 - margin), axis=1)
+        if self.view is not None:
+            inside &= self.view.inside(self.frame.to_original(local), margin)
+        return inside
 
     def crop(self, scaled_image: np.ndarray) -> np.ndarray:
         """Cut the block from the scaled image, zero-filling the part of the box outside the image.
@@ -185,7 +198,8 @@ def _axis_cores(length: int, config: BlockConfig) -> list[tuple[int, int]]:
     return [(a, min(a + core, length)) for a in starts]
 
 
-def _grid(height: int, width: int, factor: float, scale_index: int, config: BlockConfig) -> list[Block]:
+def _grid(height: int, width: int, factor: float, scale_index: int, config: BlockConfig,
+          view: View | None = None) -> list[Block]:
     w_s, h_s = scaled_size(height, width, factor)
     rows, cols = _axis_cores(h_s, config), _axis_cores(w_s, config)
     pad = config.padding
@@ -194,7 +208,7 @@ def _grid(height: int, width: int, factor: float, scale_index: int, config: Bloc
         for j, (cx0, cx1) in enumerate(cols):
             box = (cx0 - pad, ry0 - pad, min(cx1 + pad, w_s + pad), min(ry1 + pad, h_s + pad))
             blocks.append(
-                Block(scale_index, i, j, factor, (w_s, h_s), box, (cx0, ry0, cx1, ry1), (width, height))
+                Block(scale_index, i, j, factor, (w_s, h_s), box, (cx0, ry0, cx1, ry1), (width, height), view)
             )
     return blocks
 
@@ -217,6 +231,31 @@ def make_blocks(height: int, width: int, config: BlockConfig | None = None) -> l
         target = config.core_size + config.stride * (s - 1)
         blocks += _grid(height, width, target / short, k, config)
     return blocks
+
+
+def make_view_blocks(height: int, width: int, view: View, config: BlockConfig | None = None,
+                     min_inside: float = VIEW_BLOCK_INSIDE) -> list[Block]:
+    """The blocks of a simulated view of an (``height``, ``width``) image: each block scale resizes the view
+    image by the factor that scale gives the original image (:func:`make_blocks`), so that a view's levels
+    keep the original's resolution along the direction the view does not compress. A rotated view's bounding
+    box has corners outside the image: blocks with less than ``min_inside`` of their core inside it are left
+    out."""
+    config = config or BlockConfig()
+    short = min(height, width)
+    blocks: list[Block] = []
+    for k, s in enumerate(config.scales):
+        target = config.core_size + config.stride * (s - 1)
+        blocks += [b for b in _grid(view.size[1], view.size[0], target / short, k, config, view)
+                   if _core_inside(b) >= min_inside]
+    return blocks
+
+
+def _core_inside(block: Block, samples: int = 8) -> float:
+    """The fraction of a view block's core that lies inside the original image (on a grid of samples^2)."""
+    x0, y0, x1, y1 = block.core
+    u = (np.arange(samples) + 0.5) / samples
+    grid = np.stack(np.meshgrid(x0 - 0.5 + u * (x1 - x0), y0 - 0.5 + u * (y1 - y0)), -1).reshape(-1, 2)
+    return float(block.view.inside(block.level_frame.to_original(grid), margin=0.0).mean())
 
 
 def make_tiles(height: int, width: int, config: BlockConfig | None = None) -> list[Block]:
@@ -242,19 +281,34 @@ def points_in_blocks(xy: np.ndarray, blocks: list[Block]) -> sp.csr_matrix:
 
     Args:
         xy: (N, 2) points in original-image px.
-        blocks: blocks (or tiles) of that image.
+        blocks: blocks (or tiles) of that image, of the image itself or of simulated views of it (a point
+            belongs to a view's block only where it lies inside the original image, ``View.inside``).
 
     Returns:
         (n_blocks, N) boolean CSR matrix, True where the point lies in the block's core.
     """
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    if not blocks:
-        return sp.csr_matrix((0, len(xy)), dtype=bool)
+    rows, cols = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+    for view in dict.fromkeys(b.view for b in blocks):  # each view's blocks in its own frame
+        group = np.array([k for k, b in enumerate(blocks) if b.view == view], np.int64)
+        points, candidates = xy, np.arange(len(xy))
+        if view is not None:
+            candidates = np.flatnonzero(view.inside(xy))
+            points = view.frame.from_original(xy[candidates])
+        r, c = _inside_cores(points, [blocks[k] for k in group])
+        rows.append(group[r])
+        cols.append(candidates[c])
+    r, c = np.concatenate(rows), np.concatenate(cols)
+    return sp.csr_matrix((np.ones(len(r), dtype=bool), (r, c)), shape=(len(blocks), len(xy)))
+
+
+def _inside_cores(xy: np.ndarray, blocks: list[Block]) -> tuple[np.ndarray, np.ndarray]:
+    """(block, point) index pairs of the (N, 2) points (px of the blocks' unscaled image) in the blocks' cores."""
     bounds = [_core_bounds(b) for b in blocks]
     scale = np.array([[b.fx, b.fy] for b in blocks])
     lo = (np.stack([lo for lo, _ in bounds]) + 0.5) / scale - 0.5
     hi = (np.stack([hi for _, hi in bounds]) + 0.5) / scale - 0.5
-    rows, cols = [], []
+    rows, cols = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
     chunk = max(1, 4_000_000 // max(len(blocks), 1))
     for start in range(0, len(xy), chunk):
         p = xy[start : start + chunk]
@@ -262,7 +316,4 @@ def points_in_blocks(xy: np.ndarray, blocks: list[Block]) -> sp.csr_matrix:
         r, c = np.nonzero(inside)
         rows.append(r)
         cols.append(c + start)
-    r = np.concatenate(rows) if rows else np.zeros(0, np.int64)
-    c = np.concatenate(cols) if cols else np.zeros(0, np.int64)
-    return sp.csr_matrix((np.ones(len(r), dtype=bool), (r, c)), shape=(len(blocks), len(xy)))
-
+    return np.concatenate(rows), np.concatenate(cols)

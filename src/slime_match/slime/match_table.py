@@ -58,6 +58,11 @@ class MatchTable:
         """Rows selected by a boolean mask or an index array."""
         return MatchTable(*(getattr(self, f.name)[index] for f in fields(self)))
 
+    @classmethod
+    def concatenate(cls, tables: list[MatchTable]) -> MatchTable:
+        """The rows of ``tables``, one after another."""
+        return cls(*(np.concatenate([getattr(t, f.name) for t in tables]) for f in fields(cls)))
+
     @property
     def rho(self) -> np.ndarray:
         """(M,) relative orientations theta' - theta wrapped to (-pi, pi]."""

@@ -26,14 +26,16 @@ from .._runtime.timing import StageTimer
 from ..geometry.frames import Frame, homographies_to_original
 from ..geometry.ransac import HomographyRansacConfig
 from ..pipelines import BasePipeline
-from .block_planes import block_planes
+from ..views import ViewConfig, ViewRecord
+from .block_planes import BlockPlanes, block_planes
 from .blocks import Block, BlockConfig, make_blocks, make_tiles
 from .diagnostics import empty_result_reason, layout_warning, tile_count_warning
 from .expansion import Expansion, PlaneConfig, expand_planes
 from .level_cache import LevelCache, feature_levels
 from .levels import DETECTIONS, LevelRequest
 from .refine import TILE_TESTS, FlowGuide, PlaneGuide, TileMatches, final_matches, match_tiles, tile_test
-from .selection import select_planes
+from .selection import PlaneSelection, select_planes
+from .view_planes import view_planes
 from .tile_sets import TileConfig
 
 logger = logging.getLogger("slime_match")
@@ -141,18 +143,22 @@ class Layout:
 
 
 def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, config: SlimeConfig,
-              timer: StageTimer | None = None, seed: int = 0, level_cache: LevelCache | None = None
-              ) -> SlimeOutput:
+              timer: StageTimer | None = None, seed: int = 0, level_cache: LevelCache | None = None,
+              views: ViewConfig | None = None) -> SlimeOutput:
     """Run Slime on two (H, W, 3) float images with ``pipeline`` as the base.
 
     Args:
         level_cache: block and tile features of images met before (with this pipeline and ``config``), read
             and filled by the features stage; None computes them all.
+        views: simulated views of image 0 (:class:`~slime_match.views.ViewConfig`); None: off. Their planes
+            join the block planes before Sec. 3.4; "auto" adds them, one tilt after another, only while the
+            plane selection finds too little consistent geometry.
 
     Returns:
         SlimeOutput with matches in original pixels sorted by score (lower is better).
     """
     timer = timer or StageTimer()
+    views = views or ViewConfig(mode="off")
     size0, size1 = image0.shape[:2], image1.shape[:2]
     layout = Layout.of(size0, size1, config.blocks)
     warnings: list[str] = []
@@ -183,13 +189,29 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     with timer("block_pairs"), torch_threads(1):
         planes = block_planes(pipeline, *features.levels[:2], layout.blocks0, layout.blocks1, config.ransac,
                               bins=config.bins, min_matches=config.min_plane_matches, seed=seed, workers=workers)
+    expansion, selection = _select(planes, layout, config, workers, timer)
+    record = ViewRecord(views.mode)
+    if views.mode != "off":
+        blocks0 = list(layout.blocks0)
+        for tilt in views.tilts:
+            if views.mode == "auto":
+                record.reason = _geometry_found(selection, views)
+                if record.reason:
+                    break
+            with timer("views"), torch_threads(1):
+                found = view_planes(pipeline, image0, tilt, features.levels[1], layout.blocks1, config.blocks,
+                                    config.ransac, detection, config.bins, config.min_plane_matches, seed, workers,
+                                    level_cache)
+            planes = planes.joined(found.planes, len(blocks0))
+            blocks0 += found.blocks
+            record.tilts.append(tilt)
+            record.views += found.views
+            logger.info("Views of tilt %g: %d views, %d planes", tilt, found.views, len(found.planes.H))
+            expansion, selection = _select(planes, layout, config, workers, timer)
+        else:
+            record.reason = (_geometry_found(selection, views) if views.mode == "auto" else "") or "every tilt tried"
+        logger.info("Views: %s", record.reason)
     table = planes.table
-    with timer("expansion"):
-        expansion = Expansion(expand_planes(table, planes.H, planes.side, config.planes, threads=workers))
-    with timer("plane_selection"):
-        selection = select_planes(table, expansion.memberships, layout.tiles0, layout.tiles1, config.tiles,
-                                  threads=workers)
-    logger.info("Sec. 3.6: %s", selection.vote_reason)
     ftheta = selection.ftheta
     in_ftheta = ftheta.union()
     tiles = None
@@ -214,8 +236,26 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     stages = None
     if config.keep_stages:
         stages = {name: array for result in (layout, *results[1:]) for name, array in result.arrays().items()}
-    decisions = {"vote": selection.vote, "vote_reason": selection.vote_reason}
+    counts["views"] = record.views
+    decisions = {"vote": selection.vote, "vote_reason": selection.vote_reason, "views": record.as_dict()}
     return SlimeOutput(final.xy0, final.xy1, final.scores, counts, stages, warnings, decisions)
+
+
+def _select(planes: BlockPlanes, layout: Layout, config: SlimeConfig, workers: int, timer: StageTimer
+            ) -> tuple[Expansion, PlaneSelection]:
+    """Secs. 3.4-3.7 on the block planes: expansion, then the selection of F^theta."""
+    with timer("expansion"):
+        expansion = Expansion(expand_planes(planes.table, planes.H, planes.side, config.planes, threads=workers))
+    with timer("plane_selection"):
+        selection = select_planes(planes.table, expansion.memberships, layout.tiles0, layout.tiles1, config.tiles,
+                                  threads=workers)
+    return expansion, selection
+
+
+def _geometry_found(selection: PlaneSelection, views: ViewConfig) -> str:
+    """Why the run needs no more views ("" when it does): F^theta holds ``views.min_support`` matches."""
+    support = int(selection.ftheta.union().sum())
+    return f"F^theta has {support} matches (>= {views.min_support})" if support >= views.min_support else ""
 
 
 def _workers(requested: int | None) -> int:

@@ -1,0 +1,161 @@
+"""Affine view synthesis (ASIFT): simulated views of an image seen from a tilted viewpoint.
+
+A camera looking at a plane from latitude ``arccos(1 / t)`` sees it compressed by the *tilt* ``t`` along one
+direction. ASIFT simulates such views of an image: rotate by ``angle``, blur along x (anti-aliasing, a
+Gaussian of ``0.8 sqrt(t^2 - 1)`` px) and subsample x by ``t``; the rotations are sampled every ``72 / t``
+degrees in [0, 180) (ASIFT's sampling). Matching a simulated view of image 0 against image 1 compensates a
+strong tilt between the two that neither the detector's affine shapes nor the block scales can.
+
+Where views are used: Slime's block stage (``slime.views_stage``: each view is one more set of block levels)
+and a base pipeline alone (``view_matching``). Both add them adaptively by default (:class:`ViewConfig`):
+only when the plain run finds too little consistent geometry, one tilt after another.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from ._runtime.options import check_choice, check_integer
+from .errors import ConfigError
+from .geometry.frames import Frame
+
+__all__ = ["VIEW_MODES", "View", "ViewConfig", "simulate_view", "views_of_tilt"]
+
+VIEW_MODES = ("off", "auto", "always")
+ANTIALIAS = 0.8  # ASIFT's blur: sigma = ANTIALIAS * sqrt(t^2 - 1) px before subsampling x by t
+VIEW_BORDER = 2.0  # original px: keypoints of a view closer than this to the image border are dropped
+
+
+@dataclass
+class ViewConfig:
+    """Simulated views of image 0 (ASIFT tilts and rotations).
+
+    Attributes:
+        mode: "auto" (views only when the plain run finds too little consistent geometry, one tilt after
+            another until it does), "always" (every tilt), "off".
+        tilts: the tilts tried, in order (each with the rotations ``views_of_tilt`` gives it).
+        min_support: "auto" adds views while the run's best consistent set has fewer matches than this: for
+            Slime the matches of F^theta (the planes the epipolar vote kept, Secs. 3.6-3.7), for a base
+            pipeline alone those consistent with one fundamental matrix (OpenCV MAGSAC++, 3 px).
+    """
+
+    mode: str = "auto"
+    tilts: tuple[float, ...] = (2.0, 4.0)
+    min_support: int = 100
+
+    def __post_init__(self) -> None:
+        self.tilts = tuple(float(t) for t in self.tilts)
+        self.validate()
+
+    def validate(self) -> ViewConfig:
+        check_choice("views.mode", self.mode, VIEW_MODES)
+        check_integer("views.min_support", self.min_support, 1)
+        if not all(t > 1.0 for t in self.tilts):
+            raise ConfigError(f"views.tilts must all be > 1 (1 is the image itself), got {self.tilts}")
+        return self
+
+
+@dataclass(frozen=True)
+class View:
+    """A simulated view of an image: ``affine`` maps original px to view px.
+
+    Attributes:
+        tilt: compression of the x axis after the rotation (>= 1).
+        angle: rotation in degrees (counter-clockwise in the image as displayed, y down).
+        affine: (6,) row-major 2x3 map original px -> view px (pixel centres at integers).
+        size: (W, H) of the view image, px.
+        original_size: (W, H) of the original image, px.
+    """
+
+    tilt: float
+    angle: float
+    affine: tuple[float, ...]
+    size: tuple[int, int]
+    original_size: tuple[int, int]
+
+    @property
+    def frame(self) -> Frame:
+        """The view as a frame of the original image (``to_original``, ``from_original``, ``matrix``)."""
+        return Frame(view=self.affine)
+
+    def inside(self, xy_original: np.ndarray, margin: float = VIEW_BORDER) -> np.ndarray:
+        """(N,) bool: original-px points at least ``margin`` px inside the original image (a view's pixels
+        beyond it are the reflected border of the warp, not the image)."""
+        xy = np.asarray(xy_original, np.float64).reshape(-1, 2)
+        size = np.array(self.original_size, np.float64)
+        return np.all((xy >= margin - 0.5) & (xy <= size - 0.5 - margin), axis=1)
+
+    def describe(self) -> str:
+        return f"tilt {self.tilt:g}, {self.angle:g} deg"
+
+
+def view_geometry(size: tuple[int, int], tilt: float, angle: float) -> View:
+    """The view of an image of (W, H) ``size`` rotated by ``angle`` degrees and compressed along x by ``tilt``:
+    the rotated image's bounding box, then x subsampled (a pixel centre x maps to ``(x + 0.5) / t - 0.5``)."""
+    if tilt < 1.0:
+        raise ValueError(f"a tilt is >= 1, got {tilt}")
+    width, height = size
+    a = math.radians(angle)
+    rotation = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
+    corners = np.array([[-0.5, -0.5], [width - 0.5, -0.5], [-0.5, height - 0.5], [width - 0.5, height - 0.5]])
+    turned = corners @ rotation.T
+    low, high = turned.min(0), turned.max(0)
+    rotated_size = np.ceil(high - low - 1e-9).astype(int)
+    shift = -low - 0.5  # the bounding box's corner (-0.5, -0.5) in the rotated image
+    compress = np.diag([1.0 / tilt, 1.0])
+    linear = compress @ rotation
+    offset = compress @ (shift + 0.5) - 0.5
+    view_size = (max(1, math.ceil(rotated_size[0] / tilt)), int(rotated_size[1]))
+    return View(float(tilt), float(angle), tuple(np.c_[linear, offset].ravel().tolist()), view_size,
+                (int(width), int(height)))
+
+
+def simulate_view(image: np.ndarray, tilt: float, angle: float) -> tuple[np.ndarray, View]:
+    """ASIFT's simulated view of an (H, W[, C]) float image: rotated (bilinear, reflected border), blurred along
+    x by ``ANTIALIAS sqrt(t^2 - 1)`` px and subsampled along x by ``tilt``.
+
+    Returns:
+        The (H_v, W_v[, C]) float32 view image and its :class:`View`.
+    """
+    height, width = image.shape[:2]
+    view = view_geometry((width, height), tilt, angle)
+    a = math.radians(angle)
+    rotation = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
+    rotated_width = math.ceil(tilt * view.size[0] - 1e-9) if tilt > 1 else view.size[0]
+    linear = np.reshape(view.affine, (2, 3))
+    rotate = np.c_[rotation, np.diag([tilt, 1.0]) @ (linear[:, 2] + 0.5) - 0.5]  # the view's map before the x step
+    source = np.ascontiguousarray(image, dtype=np.float32)
+    rotated = cv2.warpAffine(source, rotate, (rotated_width, view.size[1]), flags=cv2.INTER_LINEAR,
+                             borderMode=cv2.BORDER_REFLECT_101)
+    if tilt == 1.0:
+        return rotated.reshape(rotated.shape[:2] + image.shape[2:]), view
+    sigma = ANTIALIAS * math.sqrt(tilt * tilt - 1.0)
+    radius = max(1, math.ceil(3.0 * sigma))
+    kernel = cv2.getGaussianKernel(2 * radius + 1, sigma)
+    blurred = cv2.sepFilter2D(rotated, -1, kernel, np.ones((1, 1)), borderType=cv2.BORDER_REFLECT_101)
+    step = np.array([[1.0 / tilt, 0.0, 0.5 / tilt - 0.5], [0.0, 1.0, 0.0]])
+    out = cv2.warpAffine(blurred, step, view.size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
+    return out.reshape(out.shape[:2] + image.shape[2:]), view
+
+
+def views_of_tilt(tilt: float) -> list[float]:
+    """ASIFT's rotations (degrees in [0, 180)) for ``tilt``: a step of ``72 / t`` degrees."""
+    step = 72.0 / tilt
+    return [k * step for k in range(math.ceil(180.0 / step - 1e-9))]
+
+
+@dataclass
+class ViewRecord:
+    """What the view synthesis did for one pair (for ``summary.json``)."""
+
+    mode: str
+    tilts: list[float] = field(default_factory=list)
+    views: int = 0
+    reason: str = "views off"
+
+    def as_dict(self) -> dict:
+        return {"mode": self.mode, "tilts": self.tilts, "views": self.views, "reason": self.reason}

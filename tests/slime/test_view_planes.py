@@ -1,0 +1,74 @@
+"""Simulated views end to end on a real tilted pair (graf 1 -> 3, exact GT): Slime's view planes map back
+to the original frame, a base pipeline alone pools its views' matches, and "auto" records why it stopped."""
+
+import numpy as np
+import pytest
+
+from slime_match.config import make_config
+from slime_match.eval.metrics import correct_matches_homography
+from slime_match.matcher import Matcher
+
+from .helpers import WEIGHT_FREE
+from .test_pipeline import graf_small  # noqa: F401  (the module fixture)
+
+
+def _correct(result, h) -> np.ndarray:
+    return correct_matches_homography(result.keypoints0, result.keypoints1, h)
+
+
+def test_slime_view_planes_hold_the_pairs_geometry(graf_small):  # noqa: F811
+    a, b, h = graf_small
+    result = Matcher(make_config("slime", views="always", scales=(1, 2), keep_stages=True,
+                                 **{"views.tilts": (2.0,)}, **WEIGHT_FREE))(a, b)
+    views = result.summary["decisions"]["views"]
+    assert views == {"mode": "always", "tilts": [2.0], "views": 5, "reason": "every tilt tried"}
+    assert result.summary["counts"]["views"] == 5
+    stages = result.stages
+    from_view = stages["planes_pairs"][:, 0] >= len(stages["blocks0"])
+    assert from_view.sum() >= 5, "the views of a 40-degree viewpoint change give planes"
+    in_view = from_view[stages["block_matches_plane"]]
+    xy0, xy1 = stages["block_matches_xy0"][in_view], stages["block_matches_xy1"][in_view]
+    ok = correct_matches_homography(xy0, xy1, h)
+    assert ok.mean() >= 0.8, ok.mean()  # mapped back through the view's affine map: the GT holds
+    for plane in np.flatnonzero(from_view)[:3]:  # each view plane's homography is the pair's, where it holds
+        points = stages["block_matches_xy0"][stages["block_matches_plane"] == plane]
+        p = np.c_[points, np.ones(len(points))]
+        mine, truth = p @ stages["planes_H"][plane].T, p @ h.T
+        error = np.linalg.norm(mine[:, :2] / mine[:, 2:] - truth[:, :2] / truth[:, 2:], axis=1)
+        assert np.median(error) < 5.0
+    ok = _correct(result, h)
+    assert ok.mean() >= 0.9 and ok.sum() > 500
+
+
+def test_auto_views_stop_when_the_plain_run_agrees(graf_small):  # noqa: F811
+    a, b, h = graf_small
+    result = Matcher(make_config("slime", scales=(1, 2), **WEIGHT_FREE))(a, b)
+    views = result.summary["decisions"]["views"]
+    assert views["mode"] == "auto" and views["views"] == 0 and views["tilts"] == []
+    assert views["reason"].startswith("F^theta has")
+    off = Matcher(make_config("slime", scales=(1, 2), views="off", **WEIGHT_FREE))(a, b)
+    np.testing.assert_array_equal(off.keypoints0, result.keypoints0)  # auto without views = off
+    assert off.summary["decisions"]["views"]["reason"] == "views off"
+
+
+def test_base_pipeline_pools_its_views_matches(graf_small):  # noqa: F811
+    a, b, h = graf_small
+    plain = Matcher(make_config("hz+", views="off", **WEIGHT_FREE))(a, b)
+    viewed = Matcher(make_config("hz+", views="always", **{"views.tilts": (2.0,)}, **WEIGHT_FREE))(a, b)
+    assert viewed.summary["decisions"]["views"]["views"] == 5 and viewed.summary["counts"]["views"] == 5
+    assert len(viewed) > len(plain)
+    assert _correct(viewed, h).sum() > _correct(plain, h).sum()
+    assert np.all(np.diff(viewed.scores) >= 0)  # pooled matches sorted by score
+    height, width = a.shape[:2]
+    assert np.all((viewed.keypoints0 >= -0.5) & (viewed.keypoints0 <= [width - 0.5, height - 0.5]))
+    auto = Matcher(make_config("hz+", **WEIGHT_FREE))(a, b)
+    record = auto.summary["decisions"]["views"]
+    assert record["mode"] == "auto" and "consistent with one F" in record["reason"]
+
+
+@pytest.mark.parametrize("bad", [{"views": "sometimes"}, {"views.tilts": (0.5,)}])
+def test_bad_view_options_are_refused(bad):
+    from slime_match.errors import ConfigError
+
+    with pytest.raises(ConfigError):
+        make_config("slime", **bad)
