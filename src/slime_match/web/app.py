@@ -75,6 +75,8 @@ def create_app(images: list[str | os.PathLike] = (), runs: list[str | os.PathLik
     Raises:
         SlimeMatchError: a folder that does not exist, or a run folder without ``pairs.json``.
     """
+    from .. import config  # noqa: F401  (torch and the pipelines load now, not on the page's first request)
+
     image_dirs = [Path(p) for p in images]
     run_dirs = [Path(p) for p in runs]
     for path in image_dirs:

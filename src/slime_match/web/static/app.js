@@ -960,6 +960,7 @@
     $("ann-open-file").addEventListener("click", guarded(() => openAnnotation($("ann-open-path").value.trim())));
     listSaved().catch(showError);
     setTab("match");
+    document.body.dataset.ready = "1";
   }
 
   // for the browser tests and the console: the state, the view and a frame-time probe
