@@ -222,48 +222,57 @@
 
   // ---------------------------------------------------------------- drawing helpers
 
-  function strideFor(n) {
+  // how many lines (and 4x as many points per image) are drawn at most: the matches in view are thinned by a
+  // stride over their index (stable while panning), so zooming into a region shows all of its matches
+  function budget() {
     const most = Math.max(0, parseInt($("max-lines").value, 10) || 0);
-    return most === 0 ? Infinity : Math.max(1, Math.ceil(n / most));
+    return most === 0 ? Infinity : most;
   }
 
-  // matches given as xy0, xy1 arrays of [x, y]; `color(k)` gives the colour group of match k
+  // matches given as xy0, xy1 arrays of [x, y]; `colorOf(k)` gives the colour of match k
   function paintPairs(ctx, v, xy0, xy1, colorOf, options = {}) {
-    const n = xy0.length;
-    const keep = options.keep || (() => true);
-    const groups = new Map();
+    const n = xy0.length, keep = options.keep;
+    const v0 = v.views[0], v1 = v.views[1], left1 = v.paneLeft(1), pw = v.paneWidth(), h = v.height;
+    const inView = (x, y) => x >= -4 && x <= pw + 4 && y >= -4 && y <= h + 4;
+    const visible = [];
     for (let k = 0; k < n; k++) {
-      if (!keep(k)) continue;
+      if (keep && !keep(k)) continue;
+      if (inView(xy0[k][0] * v0.s + v0.tx, xy0[k][1] * v0.s + v0.ty)
+        || inView(xy1[k][0] * v1.s + v1.tx, xy1[k][1] * v1.s + v1.ty)) visible.push(k);
+    }
+    const most = options.all ? Infinity : budget();
+    let lineStride = most === Infinity ? 1 : Math.max(1, Math.ceil(visible.length / Math.max(most, 1)));
+    const pointStride = most === Infinity ? 1 : Math.max(1, Math.ceil(visible.length / Math.max(4 * most, 1)));
+    lineStride = pointStride * Math.ceil(lineStride / pointStride);  // the lines' matches have their points
+    const groups = new Map();
+    for (const k of visible) {
+      if (k % pointStride !== 0) continue;
       const c = colorOf(k);
       if (!groups.has(c)) groups.set(c, []);
       groups.get(c).push(k);
     }
-    const stride = strideFor(n);
+    S.drawn = { visible: visible.length, lineStride, pointStride };
     const size = options.size || 2.5;
     for (let i = 0; i < 2; i++) {
-      const pts = i === 0 ? xy0 : xy1, vi = v.views[i], left = v.paneLeft(i), pw = v.paneWidth();
+      const pts = i === 0 ? xy0 : xy1, vi = v.views[i], left = v.paneLeft(i);
       v.inPane(i, () => {
         for (const [c, ks] of groups) {
           ctx.fillStyle = c;
-          ctx.beginPath();
           for (const k of ks) {
-            const x = left + pts[k][0] * vi.s + vi.tx, y = pts[k][1] * vi.s + vi.ty;
-            if (x < left - 4 || x > left + pw + 4 || y < -4 || y > v.height + 4) continue;
-            ctx.rect(x - size / 2, y - size / 2, size, size);
+            const x = pts[k][0] * vi.s + vi.tx, y = pts[k][1] * vi.s + vi.ty;
+            if (inView(x, y)) ctx.fillRect(left + x - size / 2, y - size / 2, size, size);
           }
-          ctx.fill();
         }
       });
     }
-    if (stride === Infinity || options.noLines) return;
-    const v0 = v.views[0], v1 = v.views[1], left1 = v.paneLeft(1);
+    if (budget() === 0 || options.noLines) return;
     ctx.lineWidth = options.lineWidth || 1;
     ctx.globalAlpha = options.alpha || 0.75;
     for (const [c, ks] of groups) {
       ctx.strokeStyle = c;
       ctx.beginPath();
       for (const k of ks) {
-        if (k % stride !== 0) continue;
+        if (k % lineStride !== 0) continue;
         ctx.moveTo(xy0[k][0] * v0.s + v0.tx, xy0[k][1] * v0.s + v0.ty);
         ctx.lineTo(left1 + xy1[k][0] * v1.s + v1.tx, xy1[k][1] * v1.s + v1.ty);
       }
@@ -328,7 +337,7 @@
     if (!p) return;
     v.inPane(pane, () => {
       const [x, y] = v.toScreen(pane, p[0], p[1]);
-      ctx.strokeStyle = color; ctx.lineWidth = 1.5;
+      ctx.strokeStyle = color; ctx.lineWidth = 2;
       ctx.beginPath(); ctx.moveTo(x - r, y); ctx.lineTo(x + r, y); ctx.moveTo(x, y - r); ctx.lineTo(x, y + r); ctx.stroke();
       ctx.beginPath(); ctx.arc(x, y, r * 0.55, 0, 2 * Math.PI); ctx.stroke();
     });
@@ -347,10 +356,10 @@
       paintPairs(ctx, v, m.keypoints0, m.keypoints1, colorOf,
         { keep: hasInliers && !showOut ? (k) => m.inliers[k] : undefined });
     }
-    if (m && S.selected && S.selected.length) {
+    if (m && S.selected && S.selected.length && $("show-matches").checked) {
       const ks = S.selected;
       paintPairs(ctx, v, ks.map((k) => m.keypoints0[k]), ks.map((k) => m.keypoints1[k]), () => "#fde047",
-        { size: 7, lineWidth: 2.5, alpha: 1 });
+        { size: 7, lineWidth: 2.5, alpha: 1, all: true });
       if (m.model) {
         for (const k of ks.slice(0, 1)) {
           const [x0, y0] = m.keypoints0[k], [x1, y1] = m.keypoints1[k];
@@ -380,7 +389,7 @@
         layer.label.forEach((l, k) => { if (l === p) ks.push(k); });
         paintPairs(ctx, v, layer.xy0, layer.xy1, () => "#d4d4d8", { noLines: true, size: 2 });
         paintPairs(ctx, v, ks.map((k) => layer.xy0[k]), ks.map((k) => layer.xy1[k]),
-          () => PALETTE[p % PALETTE.length], { size: 5, lineWidth: 1.5, alpha: 0.9 });
+          () => PALETTE[p % PALETTE.length], { size: 5, lineWidth: 1.5, alpha: 0.9, all: true });
         const pair = layer.block_pairs[p], blocks = L.blocks;
         if (pair && blocks) {
           paintBoxes(ctx, v, 0, [blocks.boxes0[pair[0]]], () => "#fde047");
@@ -424,10 +433,11 @@
     const c = A.cursor;
     if (!c) return;
     const other = 1 - c.pane, fit = A.fit || {};
+    paintCross(ctx, v, c.pane, [c.x, c.y], "#ffffff", 6);
     const H = (fit.set_H && fit.set_H[String(A.set)]) || fit.H || A.fixedH;
     if (H) {
       A.reprojected = { pane: other, point: transfer(H, c.pane, c.x, c.y) };
-      paintCross(ctx, v, other, A.reprojected.point, "#f0abfc");
+      paintCross(ctx, v, other, A.reprojected.point, "#ff3df5", 12);
     }
     if (fit.F) {
       A.epiline = { pane: other, line: epipolar(fit.F, c.pane, c.x, c.y) };
@@ -862,7 +872,7 @@
     const last = A.history.pop();
     if (!last) return;
     Object.assign(A, JSON.parse(last));
-    A.selected = -1;
+    if (A.selected >= A.pairs.length) A.selected = -1;
     annotationsChanged();
   }
   function newSet() {
@@ -921,6 +931,7 @@
     for (const b of document.querySelectorAll(".tab")) b.classList.toggle("active", b.dataset.tab === tab);
     for (const name of ["match", "runs", "annotate"]) $(`panel-${name}`).hidden = name !== tab;
     view.handler = tab === "annotate" ? annotateHandler : matchHandler;
+    $("result-section").hidden = tab === "annotate";
     if (tab === "annotate") annotationsChanged();
     view.redraw();
   }
@@ -969,7 +980,7 @@
     screenOf(pane, x, y) { return view.toScreen(pane, x, y); },
     busy() { return S.annot.fitting > 0 || view.pending; },
     measureFrames(n) {
-      const times = [];
+      const times = [], saved = view.views.map((v) => ({ ...v }));
       for (let k = 0; k < n; k++) {
         const pane = k % 2, f = k % 4 < 2 ? 1.15 : 1 / 1.15;
         view.zoom(pane, f, view.paneLeft(pane) + view.paneWidth() / 2, view.height / 2);
@@ -978,6 +989,8 @@
         view.draw();
         times.push(performance.now() - t0);
       }
+      view.views = saved;
+      view.redraw();
       times.sort((a, b) => a - b);
       return { mean: times.reduce((a, b) => a + b, 0) / n, median: times[Math.floor(n / 2)], max: times[n - 1] };
     },
