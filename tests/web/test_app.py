@@ -14,15 +14,15 @@ import pytest
 
 pytest.importorskip("fastapi", reason="slime web needs the web extra (FastAPI)")
 pytest.importorskip("multipart", reason="slime web's uploads need python-multipart")
-from fastapi.testclient import TestClient  # noqa: E402
+from fastapi.testclient import TestClient
 
-from slime_match.cli import main  # noqa: E402
-from slime_match.eval.datasets.planar import read_planar  # noqa: E402
-from slime_match.eval.datasets.wxbs import read_wxbs  # noqa: E402
-from slime_match.web import is_loopback  # noqa: E402
-from slime_match.web.app import create_app  # noqa: E402
+from slime_match.cli import main
+from slime_match.eval.datasets.planar import read_planar
+from slime_match.eval.datasets.wxbs import read_wxbs
+from slime_match.web import is_loopback
+from slime_match.web.app import create_app
 
-from .conftest import MANY, PLANAR_H  # noqa: E402
+from .conftest import MANY, PLANAR_H
 
 POST = {"X-Slime-Web": "1"}
 

@@ -28,7 +28,7 @@ def stage_listener(callback: Callable[[str, float | None], None]):
 
 
 def _tell(stage: str, seconds: float | None) -> None:
-    for callback in list(_listeners):
+    for callback in _listeners:
         callback(stage, seconds)
 
 

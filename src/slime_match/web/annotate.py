@@ -176,7 +176,7 @@ def save(folder: Path, name: str, model: str, image0: Path, image1: Path, pairs:
     """
     check_name(name)
     check_model(model)
-    file_name, text = export_text(pairs, model)
+    _, text = export_text(pairs, model)
     record = {"model": model, "image0": image0.name, "image1": image1.name, "pairs": pairs}
     if model == "F":
         target = folder / "wxbs" / name

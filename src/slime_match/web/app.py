@@ -33,7 +33,7 @@ from starlette.middleware.trustedhost import TrustedHostMiddleware
 
 from .. import __version__
 from ..errors import SlimeMatchError
-from ..io import IMAGE_EXTS, MIN_IMAGE_SIDE, load_image
+from ..io import IMAGE_EXTS, load_image
 from . import annotate
 from .folders import FolderError, Root, Roots, unique_names
 from .jobs import JobRunner
@@ -280,7 +280,7 @@ def _add_routes(app: FastAPI, state: _State) -> None:
         return Response(data, media_type=media, headers={"Cache-Control": "private, max-age=60"})
 
     @app.post("/api/upload")
-    async def upload(file: UploadFile = File(...)):
+    async def upload(file: UploadFile = File(...)):  # noqa: B008  (FastAPI's way to declare a form file)
         return await _store_upload(state, file)
 
     @app.post("/api/match")

@@ -13,8 +13,10 @@ import itertools
 import json
 import logging
 import multiprocessing
+import os
 import queue
 import shutil
+import signal
 import threading
 import time
 import uuid
@@ -138,7 +140,13 @@ class JobRunner:
         self._process.start()
 
     def _kill_worker(self) -> None:
+        """Stop the worker and the processes it forked (Slime's parallel steps): they share its process group."""
         if self._process is not None:
+            if self._process.pid is not None and hasattr(os, "killpg"):
+                try:
+                    os.killpg(self._process.pid, signal.SIGKILL)
+                except (ProcessLookupError, PermissionError):
+                    pass  # it ended already, or never became a group leader
             self._process.kill()
             self._process.join(timeout=5)
         self._process = self._tasks = self._events = None
@@ -212,9 +220,9 @@ class JobRunner:
 
 def _worker_main(tasks, events) -> None:
     """The worker process: match each task and report its stages, then its end."""
-    import signal
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C stops the server, which stops the worker
+    if hasattr(os, "setpgid"):
+        os.setpgid(0, 0)  # a group of its own, with the processes it forks: a cancel stops them all
     from .._runtime.timing import stage_listener
     from ..config import MatchConfig
     from ..errors import SlimeMatchError

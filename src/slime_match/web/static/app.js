@@ -570,7 +570,8 @@
       list.append(li);
     }
     const elapsed = job.elapsed === null ? "" : ` (${fmt(job.elapsed, 1)} s)`;
-    $("status").textContent = `${job.status}${elapsed}${job.error ? ": " + job.error : ""}`;
+    const starting = job.status === "running" && !job.stages.length ? ": starting the matching worker" : "";
+    $("status").textContent = `${job.status}${elapsed}${starting}${job.error ? ": " + job.error : ""}`;
   }
 
   async function showJobResult(job) {
