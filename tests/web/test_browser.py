@@ -132,6 +132,7 @@ def test_match_two_images_see_count_and_stage_layers(browser, server, shots):
     pick(browser, 1, "right.png")
     Select(browser.find_element("id", "preset")).select_by_value("slime-rootsift")
     browser.find_element("id", "opt-scales").send_keys("1,2")
+    Select(browser.find_element("id", "opt-ransac")).select_by_value("fundamental")
     browser.find_element("id", "run").click()
     until(lambda: browser.execute_script("return slimeWeb.S.job !== null"), 10, "the job")
 
@@ -156,7 +157,8 @@ def test_match_two_images_see_count_and_stage_layers(browser, server, shots):
     job = browser.execute_script("return slimeWeb.S.job;")
     state = browser.execute_async_script(f"fetch('/api/jobs/{job}').then(r => r.json()).then(arguments[0]);")
     assert state["status"] == "done" and count == f"{state['counts']['matches']} matches"
-    assert state["counts"]["matches"] > 100
+    assert state["counts"]["matches"] > 100 and 0 < state["counts"]["inliers"] <= state["counts"]["matches"]
+    assert f"{state['counts']['inliers']} inliers (fundamental)" in browser.find_element("id", "inlier-count").text
     stages = [li.text for li in browser.find_elements("css selector", "#progress li")]
     assert any(s.startswith("features:") for s in stages) and any(s.startswith("global_dtm:") for s in stages)
 
@@ -219,11 +221,13 @@ def test_twenty_thousand_matches_zoom_and_pan_smoothly(browser, server, shots):
     browser.save_screenshot(str(shots / "many-matches.png"))
 
 
-def test_annotate_a_planar_pair_and_save_it_for_the_bench(browser, server, shots, annotations):
+def test_annotate_a_planar_pair_and_save_it_for_the_bench(browser, server, shots, annotations, web_images):
     open_page(browser, server)
     browser.find_element("id", "tab-annotate").click()
     pick(browser, 0, "plane0.png")
-    pick(browser, 1, "plane1.png")
+    browser.find_element("id", "img1-upload").send_keys(str(web_images / "plane1.png"))  # image 1 uploaded
+    until(lambda: browser.execute_script("const r = slimeWeb.S.images[1]; return !!slimeWeb.S.imgs[1] && !!r && "
+                                         "r.root === 'uploads' && r.path.endsWith('plane1.png');"), 10, "the upload")
     targets = [(60, 50), (330, 60), (200, 140), (90, 240), (310, 230), (150, 80), (260, 180), (120, 170)]
     for k, (x, y) in enumerate(targets):
         pointer(browser, 0, x, y)

@@ -222,11 +222,11 @@
 
   // ---------------------------------------------------------------- drawing helpers
 
-  // how many lines (and 4x as many points per image) are drawn at most: the matches in view are thinned by a
-  // stride over their index (stable while panning), so zooming into a region shows all of its matches
+  // how many lines are drawn at most (0: points only): the matches in view are thinned by a stride over their
+  // index (stable while panning), so that zooming into a region shows all of its matches; points get a budget
+  // of 4x as many (4000 at least)
   function budget() {
-    const most = Math.max(0, parseInt($("max-lines").value, 10) || 0);
-    return most === 0 ? Infinity : most;
+    return Math.max(0, parseInt($("max-lines").value, 10) || 0);
   }
 
   // matches given as xy0, xy1 arrays of [x, y]; `colorOf(k)` gives the colour of match k
@@ -242,7 +242,7 @@
     }
     const most = options.all ? Infinity : budget();
     let lineStride = most === Infinity ? 1 : Math.max(1, Math.ceil(visible.length / Math.max(most, 1)));
-    const pointStride = most === Infinity ? 1 : Math.max(1, Math.ceil(visible.length / Math.max(4 * most, 1)));
+    const pointStride = most === Infinity ? 1 : Math.max(1, Math.ceil(visible.length / (4 * Math.max(most, 1000))));
     lineStride = pointStride * Math.ceil(lineStride / pointStride);  // the lines' matches have their points
     const groups = new Map();
     for (const k of visible) {
@@ -265,9 +265,9 @@
         }
       });
     }
-    if (budget() === 0 || options.noLines) return;
+    if (most === 0 || options.noLines) return;
     ctx.lineWidth = options.lineWidth || 1;
-    ctx.globalAlpha = options.alpha || 0.75;
+    ctx.globalAlpha = options.alpha || 0.7;
     for (const [c, ks] of groups) {
       ctx.strokeStyle = c;
       ctx.beginPath();
@@ -585,8 +585,8 @@
     $("result").hidden = false;
     $("match-count").textContent = `${m.count} matches`;
     $("inlier-count").textContent = Array.isArray(m.inliers)
-      ? `, ${m.inliers.reduce((a, b) => a + b, 0)} inliers (${m.kind})` : "";
-    $("match-seconds").textContent = m.seconds && m.seconds.total !== undefined ? ` in ${fmt(m.seconds.total, 2)} s` : "";
+      ? `· ${m.inliers.reduce((a, b) => a + b, 0)} inliers (${m.kind})` : "";
+    $("match-seconds").textContent = m.seconds && m.seconds.total !== undefined ? `· ${fmt(m.seconds.total, 2)} s` : "";
     $("dl-npz").href = filesUrl + "matches.npz";
     $("dl-summary").href = filesUrl + "summary.json";
     const warn = (m.warnings || []).length ? `\nwarnings: ${m.warnings.join("; ")}` : "";
