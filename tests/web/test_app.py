@@ -234,6 +234,29 @@ def test_a_failing_match_is_reported_and_the_server_goes_on(client, web_images):
     assert client.get("/api/info").status_code == 200
 
 
+def test_a_worker_that_dies_fails_its_job_alone(client):
+    body = {"image0": ref("left.png"), "image1": ref("right.png"), "preset": "rootsift"}
+    job = client.post("/api/match", headers=POST, json=body).json()
+    runner = client.app.state.slime.jobs
+    with runner._lock:
+        process = runner._process
+    os.kill(process.pid, 9)  # as the kernel's out-of-memory killer would
+    state = wait(client, job["id"])
+    assert state["status"] == "failed" and "worker stopped" in state["error"]
+    assert wait(client, client.post("/api/match", headers=POST, json=body).json()["id"])["status"] == "done"
+
+
+def test_a_fault_of_the_server_is_answered_as_json(web_images, web_run, monkeypatch):
+    def broken(folder):
+        raise RuntimeError("disk on fire")
+
+    monkeypatch.setattr("slime_match.web.app.matches_payload", broken)
+    with TestClient(create_app([web_images], [web_run]), raise_server_exceptions=False) as other:
+        answer = other.get("/api/runs/run/pairs/0")
+        assert answer.status_code == 500 and "disk on fire" in answer.json()["error"]
+        assert other.get("/api/info").status_code == 200
+
+
 def test_unknown_job(client):
     for url in ("/api/jobs/nope", "/api/jobs/nope/matches", "/api/jobs/nope/stages", "/api/jobs/nope/files/matches.npz"):
         answer = client.get(url)
