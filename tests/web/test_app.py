@@ -154,6 +154,11 @@ def test_bad_uploads_are_refused(client, name, data, status, words):
     assert words in answer.json()["error"]
 
 
+def test_an_upload_too_large_is_refused_before_it_is_read(client):
+    answer = client.post("/api/upload", headers={**POST, "Content-Length": str(50 * 2**20)}, content=b"x" * 100)
+    assert answer.status_code == 413 and "limit" in answer.json()["error"]
+
+
 def test_changes_need_the_page_header(client):
     answer = client.post("/api/upload", files={"file": ("a.png", png_bytes(), "image/png")})
     assert answer.status_code == 403 and "x-slime-web" in answer.json()["error"]

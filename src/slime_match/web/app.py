@@ -112,6 +112,19 @@ def create_app(images: list[str | os.PathLike] = (), runs: list[str | os.PathLik
         app.add_middleware(TrustedHostMiddleware, allowed_hosts=allowed_hosts)
     _add_error_handlers(app)
     _add_routes(app, state)
+
+    @app.middleware("http")
+    async def upload_size(request: Request, call_next):  # before the body is read (and spooled to disk)
+        if request.url.path == "/api/upload":
+            try:
+                length = int(request.headers.get("content-length", "0"))
+            except ValueError:
+                length = 0
+            if length > state.max_upload + 2**20:  # the form's own fields take a little more than the file
+                return JSONResponse({"error": f"the upload is larger than the limit of "
+                                              f"{state.max_upload / 2**20:g} MiB"}, status_code=413)
+        return await call_next(request)
+
     return app
 
 

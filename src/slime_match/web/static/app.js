@@ -549,15 +549,20 @@
 
   function poll(id) {
     clearTimeout(S.polling);
-    S.polling = setTimeout(guarded(async () => {
+    S.polling = setTimeout(async () => {
       if (S.job !== id) return;
-      const job = await api(`/api/jobs/${id}`);
-      renderJob(job);
-      if (job.status === "queued" || job.status === "running") { poll(id); return; }
-      $("run").disabled = false; $("cancel").disabled = true;
-      if (job.status === "done") await showJobResult(job);
-      else if (job.status === "failed") showError(`match failed: ${job.error}`);
-    }), 250);
+      try {
+        const job = await api(`/api/jobs/${id}`);
+        renderJob(job);
+        if (job.status === "queued" || job.status === "running") { poll(id); return; }
+        $("run").disabled = false; $("cancel").disabled = true;
+        if (job.status === "done") await showJobResult(job);
+        else if (job.status === "failed") showError(`match failed: ${job.error}`);
+      } catch (error) {
+        $("run").disabled = false; $("cancel").disabled = true;
+        showError(error);
+      }
+    }, 250);
   }
 
   function renderJob(job) {
@@ -576,6 +581,10 @@
 
   async function showJobResult(job) {
     const m = await api(`/api/jobs/${job.id}/matches`);
+    for (const side of [0, 1]) {  // the images may have been changed while it ran: show the matched ones
+      const ref = job.images[side], now = S.images[side];
+      if (!now || now.root !== ref.root || now.path !== ref.path) await setImage(side, ref, true);
+    }
     showMatches(m, { job: job.id }, `/api/jobs/${job.id}/files/`);
     if (m.has_stages) await loadStages(`/api/jobs/${job.id}/stages`);
   }
