@@ -289,3 +289,26 @@ def test_annotate_a_planar_pair_and_save_it_for_the_bench(browser, server, shots
     assert browser.execute_script("return slimeWeb.S.annot.pairs.length;") == 7
     browser.find_element("id", "ann-undo").click()
     assert browser.execute_script("return slimeWeb.S.annot.pairs.length;") == 8
+
+
+def test_points_sit_on_the_pixel_centres_the_library_uses(browser, server, web_images):
+    """A point (x, y) is drawn (and clicked) over the pixel whose centre is (x, y), as the matcher's keypoints
+    are: zoomed 12x, the canvas under (x - 0.3, y - 0.3) and (x + 0.3, y + 0.3) shows pixel (x, y)."""
+    import cv2
+
+    open_page(browser, server)
+    pick(browser, 0, "plane0.png")
+    image = cv2.imread(str(web_images / "plane0.png"))[:, :, ::-1].astype(int)
+    jump = np.abs(np.diff(image, axis=0))[:, :-1].sum(2) + np.abs(np.diff(image, axis=1))[:-1].sum(2)
+    y, x = np.unravel_index(np.argmax(jump[100:200, 100:300]), (100, 200))
+    x, y = int(x) + 101, int(y) + 101  # a pixel unlike its upper-left neighbours
+    seen = browser.execute_script(f"""
+        const v = slimeWeb.view;
+        v.views[0] = {{ s: 12, tx: v.paneWidth() / 2 - {x} * 12, ty: v.height / 2 - {y} * 12 }};
+        v.draw();
+        const dpr = window.devicePixelRatio || 1;
+        return [[{x} - 0.3, {y} - 0.3], [{x} + 0.3, {y} + 0.3]].map(([px, py]) => {{
+          const [sx, sy] = v.toScreen(0, px, py);
+          return Array.from(v.ctx.getImageData(Math.floor(sx * dpr), Math.floor(sy * dpr), 1, 1).data.slice(0, 3));
+        }});""")
+    assert np.abs(np.array(seen) - image[y, x]).max() <= 3, (seen, image[y, x], image[y - 1, x - 1])

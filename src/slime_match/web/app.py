@@ -30,6 +30,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from starlette.middleware.trustedhost import TrustedHostMiddleware
+from starlette.requests import ClientDisconnect
 
 from .. import __version__
 from ..errors import SlimeMatchError
@@ -252,6 +253,8 @@ async def _json(request: Request) -> Any:
         return await request.json()
     except (ValueError, UnicodeDecodeError):
         raise ApiError("the request body is not JSON") from None
+    except ClientDisconnect:  # the page went away mid-request (a reload): nobody to answer, nothing to log
+        raise ApiError("the request was cut off", 400) from None
 
 
 def _add_routes(app: FastAPI, state: _State) -> None:

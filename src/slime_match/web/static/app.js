@@ -106,7 +106,8 @@
       if (!img) return;
       const pw = this.paneWidth(), ph = this.height;
       const s = Math.min(pw / img.naturalWidth, ph / img.naturalHeight) * 0.98;
-      this.views[i] = { s, tx: (pw - img.naturalWidth * s) / 2, ty: (ph - img.naturalHeight * s) / 2 };
+      // (tx, ty): where the centre of the top-left pixel goes, the origin of the library's coordinates
+      this.views[i] = { s, tx: (pw - img.naturalWidth * s + s) / 2, ty: (ph - img.naturalHeight * s + s) / 2 };
     }
     toScreen(i, x, y) {
       const v = this.views[i];
@@ -199,7 +200,8 @@
           }
           const v = this.views[i];
           ctx.imageSmoothingEnabled = v.s < 2;
-          ctx.drawImage(img, this.paneLeft(i) + v.tx, v.ty, img.naturalWidth * v.s, img.naturalHeight * v.s);
+          ctx.drawImage(img, this.paneLeft(i) + v.tx - v.s / 2, v.ty - v.s / 2, img.naturalWidth * v.s,
+            img.naturalHeight * v.s);
         });
       }
       for (const paint of this.painters) paint(ctx, this);
@@ -293,11 +295,12 @@
     });
   }
 
-  // the segment of the line a x + b y + c = 0 inside a w x h image
+  // the segment of the line a x + b y + c = 0 inside a w x h image (pixel centres at integers: its edges are
+  // at -0.5 and w - 0.5)
   function clipLine(l, w, h) {
-    const [a, b, c] = l, pts = [];
-    if (Math.abs(b) > 1e-12) for (const x of [0, w]) { const y = -(a * x + c) / b; if (y >= 0 && y <= h) pts.push([x, y]); }
-    if (Math.abs(a) > 1e-12) for (const y of [0, h]) { const x = -(b * y + c) / a; if (x >= 0 && x <= w) pts.push([x, y]); }
+    const [a, b, c] = l, pts = [], lo = -0.5, hx = w - 0.5, hy = h - 0.5;
+    if (Math.abs(b) > 1e-12) for (const x of [lo, hx]) { const y = -(a * x + c) / b; if (y >= lo && y <= hy) pts.push([x, y]); }
+    if (Math.abs(a) > 1e-12) for (const y of [lo, hy]) { const x = -(b * y + c) / a; if (x >= lo && x <= hx) pts.push([x, y]); }
     return pts.length >= 2 ? [pts[0], pts[pts.length - 1]] : null;
   }
   const mul = (M, x, y) => [M[0][0] * x + M[0][1] * y + M[0][2], M[1][0] * x + M[1][1] * y + M[1][2],
