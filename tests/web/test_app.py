@@ -393,6 +393,16 @@ def test_save_open_round_trip_through_the_bench_readers(client, annotations):
     opened = client.get("/api/annotate/open", params={"root": "annotations", "path": "planar/astro_H12.txt"}).json()
     assert opened["kind"] == "planar" and np.allclose(opened["H"], pair.H) and len(opened["pairs"]) == 11
 
+    # a pair opened from the annotation folder saved again under its name: its images are its own copies
+    resave = {"name": "astro", "model": "F", "image0": opened["image0"], "image1": opened["image1"],
+              "pairs": opened["pairs"], "overwrite": True}
+    assert client.post("/api/annotate/save", headers=POST, json=resave).status_code == 200
+    resave.update(model="H", image0=ref("planar/astro1.png", "annotations"), image1=ref("planar/astro2.png",
+                                                                                          "annotations"))
+    assert client.post("/api/annotate/save", headers=POST, json=resave).status_code == 200
+    assert len(read_wxbs(annotations / "wxbs")) == len(read_planar(annotations / "planar")) == 1
+    opened = client.get("/api/annotate/open", params={"root": "annotations", "path": "wxbs/astro/corrs.txt"}).json()
+
     # a corrs.txt edited by hand wins over the tool's record of it
     (annotations / "wxbs" / "astro" / "corrs.txt").write_text("1 2 3 4\n" * 8)
     opened = client.get("/api/annotate/open", params={"root": "annotations", "path": "wxbs/astro/corrs.txt"}).json()

@@ -177,6 +177,7 @@ def save(folder: Path, name: str, model: str, image0: Path, image1: Path, pairs:
     check_name(name)
     check_model(model)
     _, text = export_text(pairs, model)
+    pictures = [image0.read_bytes(), image1.read_bytes()]  # first: they may be the copies that a resave replaces
     record = {"model": model, "image0": image0.name, "image1": image1.name, "pairs": pairs}
     if model == "F":
         target = folder / "wxbs" / name
@@ -204,8 +205,8 @@ def save(folder: Path, name: str, model: str, image0: Path, image1: Path, pairs:
         save_text(hfile, text)
         save_json(target / f"{name}_annotation.json", record)
         kind = "planar"
-    for source, copy in zip((image0, image1), images):
-        shutil.copyfile(source, copy)
+    for data, copy in zip(pictures, images):
+        copy.write_bytes(data)
     return {"kind": kind, "files": [f.relative_to(folder).as_posix() for f in files]}
 
 
