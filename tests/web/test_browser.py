@@ -21,6 +21,7 @@ pytest.importorskip("fastapi", reason="slime web needs the web extra (FastAPI)")
 uvicorn = pytest.importorskip("uvicorn", reason="slime web needs the web extra (uvicorn)")
 webdriver = pytest.importorskip("selenium.webdriver", reason="the browser tests need selenium (the test extra)")
 from selenium.webdriver.common.actions.action_builder import ActionBuilder
+from selenium.webdriver.common.keys import Keys
 from selenium.webdriver.support.ui import Select
 
 from slime_match.eval.datasets.planar import read_planar
@@ -285,6 +286,11 @@ def test_annotate_a_planar_pair_and_save_it_for_the_bench(browser, server, shots
     assert moved > before + 10
     browser.find_element("id", "ann-undo").click()
     assert browser.execute_script("return slimeWeb.S.annot.pairs[0].x0;") == before
+    scale = browser.execute_script("return slimeWeb.view.views[0].s;")
+    browser.find_element("id", "view").send_keys(Keys.ARROW_RIGHT, Keys.ARROW_RIGHT)  # nudged 2 screen px
+    assert abs(browser.execute_script("return slimeWeb.S.annot.pairs[0].x0;") - (before + 2 / scale)) < 1e-6
+    browser.find_element("id", "ann-undo").click()
+    browser.find_element("id", "ann-undo").click()
     browser.find_element("id", "ann-delete").click()  # pair 1 is selected since it was grabbed
     assert browser.execute_script("return slimeWeb.S.annot.pairs.length;") == 7
     browser.find_element("id", "ann-undo").click()

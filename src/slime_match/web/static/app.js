@@ -819,7 +819,7 @@
         .map((p) => (p[0] === null ? [Infinity, Infinity] : p));
       const k = nearest(pts, x, y, 8, s);
       if (k < 0) return false;
-      A.selected = k;
+      A.selected = k; A.lastPane = pane;
       this.grabbed = { k, pane }; this.movedOnce = false;
       renderPairsTable(); view.redraw();
       return true;
@@ -843,7 +843,7 @@
         remember();
         const p0 = A.pending.pane === 0 ? A.pending : { x, y }, p1 = A.pending.pane === 0 ? { x, y } : A.pending;
         A.pairs.push({ x0: p0.x, y0: p0.y, x1: p1.x, y1: p1.y, set: A.set, occluded: false });
-        A.pending = null; A.selected = A.pairs.length - 1;
+        A.pending = null; A.selected = A.pairs.length - 1; A.lastPane = pane;
       } else {
         remember();
         A.pending = { pane, x, y };
@@ -871,6 +871,16 @@
       p.occluded = !p.occluded;
       if (!p.occluded && (p.x0 === null || p.x1 === null)) { A.history.pop(); p.occluded = true; return showError("this point has no match to restore: delete it instead"); }
     } else return;
+    annotationsChanged();
+  }
+  // the arrow keys move the selected pair's point in the image last touched by one screen pixel (ten with Shift)
+  function nudge(dx, dy, far) {
+    const A = S.annot;
+    if (A.selected < 0 || A.lastPane === undefined) return;
+    const p = A.pairs[A.selected], pane = A.lastPane, step = (far ? 10 : 1) / view.views[pane].s;
+    if ((pane === 0 ? p.x0 : p.x1) === null) return;
+    remember();
+    if (pane === 0) { p.x0 += dx * step; p.y0 += dy * step; } else { p.x1 += dx * step; p.y1 += dy * step; }
     annotationsChanged();
   }
   function deleteSelected() {
@@ -953,6 +963,11 @@
     if (S.tab !== "annotate" || ["INPUT", "TEXTAREA", "SELECT"].includes(e.target.tagName)) return;
     if ((e.ctrlKey || e.metaKey) && e.key.toLowerCase() === "z") { e.preventDefault(); undo(); } else if (e.key === "Delete" || e.key === "Backspace") { e.preventDefault(); deleteSelected(); } else if (e.key.toLowerCase() === "o") markOccluded();
     else if (e.key.toLowerCase() === "n") newSet();
+    else if (e.key.startsWith("Arrow")) {
+      e.preventDefault();
+      const [dx, dy] = { ArrowLeft: [-1, 0], ArrowRight: [1, 0], ArrowUp: [0, -1], ArrowDown: [0, 1] }[e.key];
+      nudge(dx, dy, e.shiftKey);
+    }
   });
 
   async function start() {
