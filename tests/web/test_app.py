@@ -314,6 +314,8 @@ def test_missing_folders_stop_before_serving(tmp_path, capsys):
     assert "does not exist" in capsys.readouterr().err
     assert main(["web", "--run", str(tmp_path)]) == 2
     assert "pairs.json" in capsys.readouterr().err
+    assert main(["web", "--max-upload-mb", "0"]) == 2
+    assert "upload limit" in capsys.readouterr().err
 
 
 def test_loopback_names():

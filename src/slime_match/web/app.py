@@ -80,6 +80,8 @@ def create_app(images: list[str | os.PathLike] = (), runs: list[str | os.PathLik
 
     image_dirs = [Path(p) for p in images]
     run_dirs = [Path(p) for p in runs]
+    if not max_upload_mb > 0:
+        raise SlimeMatchError(f"the upload limit must be > 0 MB, got {max_upload_mb}")
     for path in image_dirs:
         if not path.is_dir():
             raise SlimeMatchError(f"image folder {path} does not exist")

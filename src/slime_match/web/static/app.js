@@ -253,7 +253,7 @@
       if (!groups.has(c)) groups.set(c, []);
       groups.get(c).push(k);
     }
-    S.drawn = { visible: visible.length, lineStride, pointStride };
+    if (options.record) S.drawn = { visible: visible.length, lineStride, pointStride };
     const size = options.size || 2.5;
     for (let i = 0; i < 2; i++) {
       const pts = i === 0 ? xy0 : xy1, vi = v.views[i], left = v.paneLeft(i);
@@ -357,7 +357,7 @@
       const colorOf = hasInliers ? (k) => (m.inliers[k] ? "#22c55e" : "#ef4444")
         : (k) => PALETTE[Math.floor(m.keypoints0[k][1] / 24) % PALETTE.length];
       paintPairs(ctx, v, m.keypoints0, m.keypoints1, colorOf,
-        { keep: hasInliers && !showOut ? (k) => m.inliers[k] : undefined });
+        { keep: hasInliers && !showOut ? (k) => m.inliers[k] : undefined, record: true });
     }
     if (m && S.selected && S.selected.length && $("show-matches").checked) {
       const ks = S.selected;
