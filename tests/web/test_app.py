@@ -316,6 +316,9 @@ def test_missing_folders_stop_before_serving(tmp_path, capsys):
     assert "pairs.json" in capsys.readouterr().err
     assert main(["web", "--max-upload-mb", "0"]) == 2
     assert "upload limit" in capsys.readouterr().err
+    (tmp_path / "file").write_text("")
+    assert main(["web", "--annotations", str(tmp_path / "file")]) == 2
+    assert "is a file" in capsys.readouterr().err
 
 
 def test_loopback_names():

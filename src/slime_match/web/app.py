@@ -88,17 +88,17 @@ def create_app(images: list[str | os.PathLike] = (), runs: list[str | os.PathLik
     for path in run_dirs:
         if not (path / "pairs.json").is_file():
             raise SlimeMatchError(f"{path} is not a `slime pairs` run folder (no pairs.json in it)")
-    work = Path(tempfile.mkdtemp(prefix="slime-web-"))
+    annotations_dir = None if annotations is None else Path(annotations)
+    if annotations_dir is not None:
+        if annotations_dir.exists() and not annotations_dir.is_dir():
+            raise SlimeMatchError(f"annotation folder {annotations_dir} is a file")
+        annotations_dir.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix="slime-web-"))  # uploads and jobs, removed when the server stops
     uploads = work / "uploads"
     uploads.mkdir()
     roots = [Root(name, path, "images") for name, path in zip(unique_names(image_dirs, "images"), image_dirs)]
     roots.append(Root("uploads", uploads, "uploads"))
-    annotations_dir = None
-    if annotations is not None:
-        annotations_dir = Path(annotations)
-        if annotations_dir.exists() and not annotations_dir.is_dir():
-            raise SlimeMatchError(f"annotation folder {annotations_dir} is a file")
-        annotations_dir.mkdir(parents=True, exist_ok=True)
+    if annotations_dir is not None:
         roots.append(Root("annotations", annotations_dir, "annotations"))
     state = _State(Roots(roots), dict(zip(unique_names(run_dirs, "run"), run_dirs)), annotations_dir,
                    int(max_upload_mb * 2**20), work)

@@ -149,6 +149,9 @@ class JobRunner:
                     pass  # it ended already, or never became a group leader
             self._process.kill()
             self._process.join(timeout=5)
+        for channel in (self._tasks, self._events):
+            if channel is not None:
+                channel.cancel_join_thread()  # nobody reads them any more: never wait on them at exit
         self._process = self._tasks = self._events = None
 
     def _dispatch(self) -> None:
