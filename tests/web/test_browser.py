@@ -183,6 +183,9 @@ def test_match_two_images_see_count_and_stage_layers(browser, server, shots):
     browser.find_element("id", "layer-planes").click()
     browser.find_element("id", "layer-tiles").click()
     browser.find_element("id", "layer-ftheta").click()
+    fx, fy = browser.execute_script("return slimeWeb.S.stages.layers.ftheta.xy0[0];")
+    pointer(browser, 0, fx, fy, click=False)  # a set of F^theta: its matches, tile pair and plane
+    until(lambda: "of ftheta, tile pair" in browser.find_element("id", "info").text, 5, "the hovered set")
     settle(browser)
     browser.save_screenshot(str(shots / "stage-tiles-ftheta.png"))
     assert browser.execute_script("return slimeWeb.S.layers.tiles && !slimeWeb.S.layers.planes;")

@@ -16,7 +16,7 @@
     imgs: [null, null],            // the loaded HTMLImageElements
     matches: null, selected: null, // the shown matches; the selected keypoint's match indices
     source: null,                  // where the matches came from: {job} or {run, index}
-    stages: null, layers: {}, hoverPlane: null,
+    stages: null, layers: {}, hover: null,  // hover: {layer, label} of the plane or set under the pointer
     job: null, polling: null,
     annot: { pairs: [], pending: null, set: 0, selected: -1, history: [], fit: null, fixedH: null,
       cursor: null, model: "H", epiline: null, reprojected: null, fitting: 0 },
@@ -283,10 +283,10 @@
     ctx.globalAlpha = 1;
   }
 
-  function paintBoxes(ctx, v, i, boxes, colorOf) {
+  function paintBoxes(ctx, v, i, boxes, colorOf, width = 1.2) {
     const vi = v.views[i], left = v.paneLeft(i);
     v.inPane(i, () => {
-      ctx.lineWidth = 1.2;
+      ctx.lineWidth = width;
       for (let k = 0; k < boxes.length; k++) {
         const [x0, y0, x1, y1] = boxes[k];
         ctx.strokeStyle = colorOf(k);
@@ -387,16 +387,18 @@
         const scaleOf = (boxes) => (k) => SCALE_COLORS[boxes[k][4] % SCALE_COLORS.length];
         paintBoxes(ctx, v, 0, layer.boxes0, name === "tiles" ? () => LAYER_COLORS.tiles : scaleOf(layer.boxes0));
         paintBoxes(ctx, v, 1, layer.boxes1, name === "tiles" ? () => LAYER_COLORS.tiles : scaleOf(layer.boxes1));
-      } else if (name === "planes" && S.hoverPlane !== null) {
-        const p = S.hoverPlane, ks = [];
+      } else if (S.hover && S.hover.layer === name) {
+        const p = S.hover.label, ks = [];
         layer.label.forEach((l, k) => { if (l === p) ks.push(k); });
         paintPairs(ctx, v, layer.xy0, layer.xy1, () => "#d4d4d8", { noLines: true, size: 2 });
         paintPairs(ctx, v, ks.map((k) => layer.xy0[k]), ks.map((k) => layer.xy1[k]),
           () => PALETTE[p % PALETTE.length], { size: 5, lineWidth: 1.5, alpha: 0.9, all: true });
-        const pair = layer.block_pairs[p], blocks = L.blocks;
-        if (pair && blocks) {
-          paintBoxes(ctx, v, 0, [blocks.boxes0[pair[0]]], () => "#fde047");
-          paintBoxes(ctx, v, 1, [blocks.boxes1[pair[1]]], () => "#fde047");
+        // the block pair of a plane, the tile pair of a set
+        const pair = name === "planes" ? layer.block_pairs[p] : (layer.set_tiles || [])[p];
+        const boxes = name === "planes" ? L.blocks : L.tiles;
+        if (pair && boxes) {
+          paintBoxes(ctx, v, 0, [boxes.boxes0[pair[0]]], () => "#fef08a", 3);
+          paintBoxes(ctx, v, 1, [boxes.boxes1[pair[1]]], () => "#fef08a", 3);
         }
       } else if (layer.label) {
         paintPairs(ctx, v, layer.xy0, layer.xy1, (k) => PALETTE[layer.label[k] % PALETTE.length]);
@@ -492,7 +494,7 @@
   }
 
   function clearResults() {
-    S.matches = null; S.selected = null; S.stages = null; S.layers = {}; S.hoverPlane = null; S.source = null;
+    S.matches = null; S.selected = null; S.stages = null; S.layers = {}; S.hover = null; S.source = null;
     $("result").hidden = true; renderLayers(); renderInfo("");
     view.redraw();
   }
@@ -629,7 +631,7 @@
       const label = document.createElement("label");
       const box2 = document.createElement("input");
       box2.type = "checkbox"; box2.id = `layer-${name}`; box2.checked = !!S.layers[name];
-      box2.addEventListener("change", () => { S.layers[name] = box2.checked; S.hoverPlane = null; view.redraw(); });
+      box2.addEventListener("change", () => { S.layers[name] = box2.checked; S.hover = null; view.redraw(); });
       const swatch = document.createElement("span");
       swatch.className = "swatch"; swatch.style.background = LAYER_COLORS[name];
       label.append(box2, " ", swatch, `${name}: ${title} (${count})`);
@@ -685,21 +687,29 @@
         lines.join("\n") + more);
       view.redraw();
     },
+    // over a match of the most refined labelled layer shown: its plane (or set) alone, with its homography
     hover(pane, x, y) {
-      if (!S.stages || !S.layers.planes || !S.stages.layers.planes) return;
-      const layer = S.stages.layers.planes;
+      if (!S.stages) return;
+      const L = S.stages.layers;
+      const name = ["ftheta", "fbar", "superset", "planes"].find((n) => S.layers[n] && L[n]);
+      if (!name) return;
+      const layer = L[name];
       const k = nearest(pane === 0 ? layer.xy0 : layer.xy1, x, y, 8, view.views[pane].s);
-      const plane = k < 0 ? null : layer.label[k];
-      if (plane === S.hoverPlane) return;
-      S.hoverPlane = plane;
-      if (plane !== null) {
-        const count = layer.label.filter((l) => l === plane).length;
-        const H = layer.H[plane].map((r) => r.map((v) => v.toPrecision(5).padStart(12)).join(" ")).join("\n");
-        renderInfo(`plane ${plane}: ${count} matches, block pair ${layer.block_pairs[plane].join(" / ")}, H (image 0 -> 1):\n${H}`);
+      const label = k < 0 ? null : layer.label[k];
+      if (label === (S.hover ? S.hover.label : null) && (!S.hover || S.hover.layer === name)) return;
+      S.hover = label === null ? null : { layer: name, label };
+      if (label !== null) {
+        const count = layer.label.filter((l) => l === label).length;
+        const plane = name === "planes" ? label : (layer.set_plane || [])[label];
+        const H = L.planes && plane !== undefined ? L.planes.H[plane] : null;
+        const matrix = H ? H.map((r) => r.map((v) => v.toPrecision(5).padStart(12)).join(" ")).join("\n") : "";
+        const where = name === "planes" ? `block pair ${layer.block_pairs[label].join(" / ")}`
+          : `set ${label} of ${name}, tile pair ${(layer.set_tiles || [])[label]}`;
+        renderInfo(`plane ${plane}: ${count} matches, ${where}` + (H ? `, H (image 0 -> 1):\n${matrix}` : ""));
       }
       view.redraw();
     },
-    leave() { if (S.hoverPlane !== null) { S.hoverPlane = null; view.redraw(); } },
+    leave() { if (S.hover) { S.hover = null; view.redraw(); } },
   };
 
   // ---------------------------------------------------------------- runs
