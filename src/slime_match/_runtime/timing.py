@@ -5,11 +5,31 @@ from __future__ import annotations
 import logging
 import time
 from collections import defaultdict
+from collections.abc import Callable
 from contextlib import contextmanager
 
 import torch
 
 logger = logging.getLogger("slime_match")
+
+# callbacks told of every stage as it starts, ``(stage, None)``, and ends, ``(stage, seconds)`` (progress)
+_listeners: list[Callable[[str, float | None], None]] = []
+
+
+@contextmanager
+def stage_listener(callback: Callable[[str, float | None], None]):
+    """Within the block, ``callback(stage, None)`` as each StageTimer stage of this process starts and
+    ``callback(stage, seconds)`` as it ends (``slime web`` shows them as progress)."""
+    _listeners.append(callback)
+    try:
+        yield
+    finally:
+        _listeners.remove(callback)
+
+
+def _tell(stage: str, seconds: float | None) -> None:
+    for callback in _listeners:
+        callback(stage, seconds)
 
 
 class StageTimer:
@@ -25,6 +45,7 @@ class StageTimer:
     @contextmanager
     def __call__(self, stage: str):
         _sync()
+        _tell(stage, None)
         start = time.perf_counter()
         try:
             yield
@@ -33,6 +54,7 @@ class StageTimer:
             elapsed = time.perf_counter() - start
             self.seconds[stage] += elapsed
             logger.info("%s: %.2f s", stage, elapsed)
+            _tell(stage, elapsed)
 
     def as_dict(self) -> dict[str, float]:
         return {name: round(value, 4) for name, value in self.seconds.items()}

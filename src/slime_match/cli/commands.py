@@ -1,5 +1,5 @@
 """The commands: ``slime match``, ``slime pairs``, ``slime make-pairs``, ``slime demo``, ``slime viz``,
-``slime colmap``, ``slime hloc`` (and ``slime bench`` from slime_match.eval)."""
+``slime colmap``, ``slime hloc``, ``slime web`` (and ``slime bench`` from slime_match.eval)."""
 
 from __future__ import annotations
 
@@ -156,6 +156,13 @@ def cmd_hloc(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_web(args: argparse.Namespace) -> int:
+    from ..web import serve  # FastAPI and uvicorn load only here
+
+    serve(args.host, args.port, args.images, args.run, args.annotations, args.max_upload_mb)
+    return 0
+
+
 def _add_export_options(parser: argparse.ArgumentParser, files: str, tool: str) -> None:
     """The options that ``slime colmap`` and ``slime hloc`` share: the run, its images, the output folder and
     how the run's keypoints are merged."""
@@ -247,6 +254,22 @@ def build_parser() -> argparse.ArgumentParser:
     _add_export_options(hloc, "features.h5, matches.h5, pairs.txt, summary.json", "hloc")
     hloc.add_argument("-v", "--verbose", action="store_true", help="log what was written")
     hloc.set_defaults(func=cmd_hloc)
+
+    web = sub.add_parser("web", help="a local web app: match two images and view the matches, Slime's stages and "
+                                     "runs; annotate ground-truth correspondences (needs the web extra)")
+    web.add_argument("--host", default="127.0.0.1",
+                     help="address to listen on (default 127.0.0.1: this machine only)")
+    web.add_argument("--port", type=positive_int, default=8000, help="port (default 8000)")
+    web.add_argument("--images", action="append", default=[], metavar="DIR",
+                     help="an image folder the app may read (repeatable); it serves no file outside its folders")
+    web.add_argument("--run", action="append", default=[], metavar="RUNDIR",
+                     help="a `slime pairs` run folder to browse (repeatable; its images are found in --images)")
+    web.add_argument("--annotations", default=None, metavar="DIR",
+                     help="folder where the annotation tool saves pairs as slime bench reads them "
+                          "(DIR/wxbs/<name>/, DIR/planar/); without it, annotations are downloaded")
+    web.add_argument("--max-upload-mb", type=float, default=None, metavar="MB",
+                     help="largest image upload accepted (default 25)")
+    web.set_defaults(func=cmd_web)
 
     from ..eval.bench import add_bench_parser
 
