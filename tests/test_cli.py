@@ -89,6 +89,21 @@ def test_slime_tile_test_option(pair, tmp_path, capsys):
     assert code == 2 and "'tile_test' is a Slime option" in err and not (tmp_path / "r").exists()
 
 
+def test_views_option(pair, tmp_path, capsys):
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--method", "hz+", *WEIGHT_FREE, "--views", "always",
+                           "--set", "views.tilts=2", "--no-plot")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["config"]["views"]["mode"] == "always" and summary["config"]["views"]["tilts"] == [2.0]
+    assert summary["decisions"]["views"] == {"mode": "always", "tilts": [2.0], "views": 5,
+                                             "reason": "every tilt tried"}
+    with pytest.raises(SystemExit):
+        main(["match", *pair, "-o", str(tmp_path / "r"), "--views", "sometimes"])
+    assert "--views" in capsys.readouterr().err and not (tmp_path / "r").exists()
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "r", "--set", "views.tilts=0.5")
+    assert code == 2 and "views.tilts" in err and not (tmp_path / "r").exists()
+
+
 def test_set_any_option_and_rerun_a_recorded_configuration(pair, tmp_path, capsys):
     code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "a", *WEIGHT_FREE, "--set", "slime.tiles.t_xi=12",
                            "--set", "slime.blocks.scales=1,2", "--no-plot")

@@ -161,3 +161,31 @@ def test_view_is_hashable_and_part_of_a_block_repr():
     view = view_geometry((64, 48), 2.0, 0.0)
     assert isinstance(hash(view), int) and isinstance(view, View)
     assert "tilt=2.0" in repr(make_view_blocks(48, 64, view)[0])
+
+
+def test_joined_block_planes_keep_each_planes_matches_and_add_the_counts():
+    from slime_match.slime.block_planes import BlockPlanes
+    from slime_match.slime.match_table import MatchTable, deduplicate
+
+    def planes(n_planes: int, start: float, blocks: int) -> BlockPlanes:
+        rows = 3 * n_planes
+        xy = start + np.arange(rows * 2, dtype=float).reshape(rows, 2)
+        source = np.repeat(np.arange(n_planes), 3)
+        raw = MatchTable(xy, xy + 1, np.zeros(rows), np.zeros(rows), np.ones(rows), np.ones(rows), np.ones(rows),
+                         source, np.arange(rows, dtype=float))
+        level = BlockPairMatches(np.c_[np.arange(n_planes), np.zeros(n_planes, int)] % blocks,
+                                 np.tile(np.eye(3), (n_planes, 1, 1)), np.zeros(n_planes), source, xy, xy + 1,
+                                 np.ones(rows), np.ones(rows), np.arange(rows, dtype=float))
+        return BlockPlanes(level, raw, deduplicate(raw)[0], np.tile(np.eye(3), (n_planes, 1, 1)), np.ones(n_planes),
+                           {"block_pairs": 10 * n_planes, "block_planes": n_planes})
+
+    first, second = planes(2, 0.0, 4), planes(3, 1000.0, 5)
+    second.raw.xy0[0] = first.raw.xy0[0]  # one exact duplicate across the two: merged in the table
+    second.raw.xy1[0] = first.raw.xy1[0]
+    joined = first.joined(second, block_offset=4)
+    assert len(joined.H) == 5 and len(joined.side) == 5
+    np.testing.assert_array_equal(joined.raw.source, [0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4])
+    np.testing.assert_array_equal(joined.level_matches.pairs[:, 0], [0, 1, 4, 5, 6])
+    np.testing.assert_array_equal(joined.level_matches.match_pair[6:], [2, 2, 2, 3, 3, 3, 4, 4, 4])
+    assert len(joined.table) == 14 and joined.table.weight.sum() == 15
+    assert joined.counts == {"block_pairs": 50, "block_planes": 5, "block_matches": 15, "block_matches_unique": 14}
