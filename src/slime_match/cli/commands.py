@@ -79,8 +79,8 @@ def cmd_make_pairs(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     """Match scikit-image's Middlebury motorcycle stereo pair and score it with its disparity map."""
     import numpy as np
-    from skimage.data import stereo_motorcycle
 
+    from ..eval.datasets.motorcycle import stereo_motorcycle
     from ..eval.metrics import disparity_error
     from ..matcher import Matcher
     from ..runs.outputs import write_pair_outputs
