@@ -18,13 +18,12 @@ from pathlib import Path
 from typing import Any
 
 from ._runtime.options import check_choice, check_integer, config_from_dict, set_option
+from .choices import DEVICES, RANSAC_CHOICES
 from .errors import ConfigError
-from .geometry.backends import RANSAC_CHOICES
 from .io import MIN_IMAGE_SIDE
 from .pipelines import PIPELINES, BaseConfig, base_names, unimplemented
 from .slime.pipeline import SlimeConfig
 
-DEVICES = ("auto", "cpu", "cuda")
 # working-size limits (px) of "auto": Slime upsamples images whose shorter side is under 480 px (its 256 px
 # tiles and the Sec. 3.6 vote need several tiles per image) and shrinks those whose longer side is over 1200
 # px (the paper's image sizes; tiles and time grow with the image); a base pipeline alone runs at full size

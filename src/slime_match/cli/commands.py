@@ -10,6 +10,7 @@ from pathlib import Path
 
 from .. import __version__
 from .._runtime import openmp
+from ..choices import CAMERA_MODES
 from ..errors import ConfigError, SlimeMatchError, caused_by_interrupt
 from .match_options import add_match_options, add_workers_option, config_of, positive_int
 
@@ -227,8 +228,6 @@ def build_parser() -> argparse.ArgumentParser:
     viz.add_argument("--stage", action="append", default=None, help="stage name(s) to draw (default: all)")
     viz.set_defaults(func=cmd_viz)
 
-    from ..runs.colmap import CAMERA_MODES
-
     colmap = sub.add_parser("colmap", help="a `slime pairs` run as a COLMAP database and its sparse "
                                            "reconstruction (needs pycolmap)")
     _add_export_options(colmap, "database.db, pairs.txt, summary.json, sparse/N/ (COLMAP models)", "COLMAP")
@@ -248,7 +247,7 @@ def build_parser() -> argparse.ArgumentParser:
     hloc.add_argument("-v", "--verbose", action="store_true", help="log what was written")
     hloc.set_defaults(func=cmd_hloc)
 
-    from ..eval.bench import add_bench_parser
+    from ..eval.bench_args import add_bench_parser
 
     add_bench_parser(sub)
 

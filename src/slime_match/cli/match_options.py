@@ -5,22 +5,23 @@ from __future__ import annotations
 
 import argparse
 
+from ..choices import (
+    BUILTIN_BASES,
+    DESCRIPTOR_CHOICES,
+    DETECTIONS,
+    DEVICES,
+    ORIENTATION_CHOICES,
+    RANSAC_CHOICES,
+    SHAPE_METHODS,
+    TILE_TESTS,
+)
 from ..errors import ConfigError
 
 
 def add_match_options(parser: argparse.ArgumentParser) -> None:
-    from ..config import DEVICES, methods
-    from ..features.descriptors import DESCRIPTOR_CHOICES
-    from ..features.orientation import ORIENTATION_CHOICES
-    from ..features.shape import SHAPE_METHODS
-    from ..geometry.backends import RANSAC_CHOICES
-    from ..pipelines import base_names
-    from ..slime.levels import DETECTIONS
-    from ..slime.refine import TILE_TESTS
-
-    parser.add_argument("--method", default=None, choices=methods(),
+    parser.add_argument("--method", default=None, choices=("slime", *BUILTIN_BASES),
                         help="Slime (default) or a base pipeline alone")
-    parser.add_argument("--base", default=None, choices=base_names(),
+    parser.add_argument("--base", default=None, choices=BUILTIN_BASES,
                         help="base pipeline run inside Slime (default hz+)")
     parser.add_argument("--descriptor", default=None, choices=DESCRIPTOR_CHOICES,
                         help="Hz+ / Key.Net descriptor; auto = the best whose weights are available: HardNet, "
@@ -49,10 +50,10 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
                              "alone); wins over --min-side; matches come back in original pixels")
     parser.add_argument("--magnification", type=float, default=None,
                         help="patch size over the detected region (default 6 over HarrisZ+ ellipses, 1 over "
-                             "Key.Net frames); smaller patches give a weaker base (docs/coverage.md)")
+                             "Key.Net frames); smaller patches give a weaker base")
     parser.add_argument("--scales", type=parse_scales, default=None,
                         help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper; "
-                             "1,2 is about 2.5x faster, 1,2,3,4 covers more at about 2.5x the time; see the README)")
+                             "1,2 is about 2.5x faster, 1,2,3,4 covers more at about 2.5x the time)")
     parser.add_argument("--detection", default=None, choices=DETECTIONS,
                         help="Slime: how blocks get keypoints: 'merged' (the hz+ default) detects every block "
                              "crop on its own and describes shared keypoints once, 'block' also describes per "

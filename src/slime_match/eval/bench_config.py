@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from slime_match.choices import PAPER_METHODS
 from slime_match.errors import ConfigError
 from slime_match.eval import metrics as M
-from slime_match.eval.methods import PAPER_METHODS, method_label, parse_method_spec
+from slime_match.eval.methods import method_label, parse_method_spec
 
 
 @dataclass

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from slime_match.choices import TILE_TESTS
+
 from ..geometry.homography import two_sided_error_batch
 from ..matching.dtm import DTMConfig, dtm_filter
 from ..pipelines import BasePipeline
@@ -76,7 +78,6 @@ class PlaneGuide:
         return ((error < self.threshold) & (np.sign(w) == self.sides[planes][:, None])).any(axis=0)
 
 
-TILE_TESTS = ("plane", "flow")  # Sec. 3.8's test; "flow" is the paper's, "plane" the default
 
 
 def tile_test(kind: str, flow: FlowGuide, plane: PlaneGuide
