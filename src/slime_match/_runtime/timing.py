@@ -9,6 +9,8 @@ from contextlib import contextmanager
 
 import torch
 
+from . import progress
+
 logger = logging.getLogger("slime_match")
 
 
@@ -27,7 +29,8 @@ class StageTimer:
         _sync()
         start = time.perf_counter()
         try:
-            yield
+            with progress.stage(stage):
+                yield
         finally:
             _sync()
             elapsed = time.perf_counter() - start

@@ -38,8 +38,11 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=None, help="random seed (RANSAC sampling; default 0)")
     parser.add_argument("--device", default=None, choices=DEVICES, help="default auto: CUDA when available")
     parser.add_argument("--weights-dir", default=None, help="folder with model weights (else TORCH_HOME cache)")
-    parser.add_argument("-v", "--verbose", action="store_true",
-                        help="log each stage as it finishes (seconds) and Slime's block and tile layout")
+    loudness = parser.add_mutually_exclusive_group()
+    loudness.add_argument("-v", "--verbose", action="store_true",
+                          help="log each stage as it finishes (seconds) and Slime's block and tile layout")
+    loudness.add_argument("-q", "--quiet", action="store_true",
+                          help="print nothing but errors: no warnings, no progress bar, no result line")
     parser.add_argument("--min-side", type=parse_side, default=None, metavar="PX|none",
                         help="upsample (Lanczos3) images whose shorter side is smaller to this many px before "
                              "matching (default auto: 480 for Slime, whose tiles need it; none for a base "
