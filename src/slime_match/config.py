@@ -144,10 +144,10 @@ PRESETS: dict[str, dict[str, Any]] = {
     "slime-upright": {"method": "slime", "base": "hz+", "upright": True},
     "slime-rootsift": {"method": "slime", "base": "rootsift"},
     # the paper's SM suggests dropping block levels for speed: without the 3-blocks scale, 64 block pairs
-    # instead of 400 (see README, Performance, for what it does to speed and quality)
+    # instead of 400 (docs/performance.md, "Speed against quality", for what it does to speed and quality)
     "slime-fast": {"method": "slime", "base": "hz+", "scales": (1, 2)},
     # a fourth, finer block level for users who value coverage over time: 1600 block pairs instead of 400
-    # (see README, Performance)
+    # (docs/performance.md, "Speed against quality")
     "slime-fine": {"method": "slime", "base": "hz+", "scales": (1, 2, 3, 4)},
     "slime-keynet": {"method": "slime", "base": "keynet"},
     "slime-keynet-upright": {"method": "slime", "base": "keynet", "upright": True},
