@@ -1,4 +1,4 @@
-"""Shared test fixtures: paths to ../shared data and the weights cache, and the skips of tests whose data or
+"""Shared test fixtures: paths to the test data and weights folders beside the repository, and the skips of tests whose data or
 weights are absent.
 
 A test that needs network weights (AffNet, OriNet, TFeat, HardTFeat, HardNet, Key.Net) skips, naming them,
@@ -84,7 +84,7 @@ def device(request) -> torch.device:
 
 
 def require(path: Path) -> Path:
-    """Skip the calling test when a ../shared file it reads is absent (e.g. a user's clone)."""
+    """Skip the calling test when a data file it reads is absent (e.g. a user's clone)."""
     if not path.exists():
         pytest.skip(f"needs {path}")
     return path
