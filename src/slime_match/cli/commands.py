@@ -175,6 +175,12 @@ def cmd_viz(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    from ..eval.bench import cmd_bench as run_bench
+
+    return run_bench(args)
+
+
 def cmd_colmap(args: argparse.Namespace) -> int:
     from ..runs.colmap import DATABASE_FILE, SPARSE_FOLDER, export_run
 
@@ -302,7 +308,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from ..eval.bench_args import add_bench_parser
 
-    add_bench_parser(sub)
+    add_bench_parser(sub, cmd_bench)
 
     return parser
 

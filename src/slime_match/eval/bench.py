@@ -32,7 +32,7 @@ from typing import Any
 from tqdm import tqdm
 
 from slime_match.errors import ConfigError
-from slime_match.eval.bench_args import add_bench_parser
+from slime_match.eval import bench_args
 from slime_match.eval.bench_config import BenchConfig
 from slime_match.eval.code_version import code_version
 from slime_match.eval.methods import make_method, method_label
@@ -197,6 +197,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
             f"solved, {len(v['no_match_pairs'])} without matches{empty}"
         )
     return 0
+
+
+def add_bench_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register ``bench`` on a ``subparsers`` object, running :func:`cmd_bench`."""
+    return bench_args.add_bench_parser(subparsers, cmd_bench)
 
 
 def main(argv: list[str] | None = None) -> int:

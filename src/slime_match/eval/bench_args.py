@@ -4,19 +4,16 @@ numba or OpenCV), so that building the ``slime`` parser stays fast."""
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 
 from slime_match.choices import PAPER_METHODS
 
 
-def _cmd_bench(args: argparse.Namespace) -> int:
-    from slime_match.eval.bench import cmd_bench
-
-    return cmd_bench(args)
-
-
-def add_bench_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    """Register ``bench`` on a ``subparsers`` object (``slime bench``); ``func`` runs
-    :func:`slime_match.eval.bench.cmd_bench`."""
+def add_bench_parser(subparsers: argparse._SubParsersAction, run: Callable[[argparse.Namespace], int]
+                     ) -> argparse.ArgumentParser:
+    """Register ``bench`` on a ``subparsers`` object (``slime bench``), with ``run`` (the parsed arguments ->
+    exit code; :func:`slime_match.eval.bench.cmd_bench`, or a function that imports it when called) as its
+    ``func``."""
     p = subparsers.add_parser(
         "bench",
         help="run methods over datasets and write the paper's metric tables",
@@ -55,5 +52,5 @@ def add_bench_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p.add_argument("--protocol-h-threshold", type=float, default=3.0, help="EVD protocol MAGSAC++ threshold (px)")
     p.add_argument("--protocol-f-threshold", type=float, default=3.0, help="WxBS protocol MAGSAC++ threshold (px)")
     p.add_argument("--protocol-max-iters", type=int, default=10000, help="MAGSAC++ iterations of the protocols")
-    p.set_defaults(func=_cmd_bench)
+    p.set_defaults(func=run)
     return p
