@@ -95,6 +95,7 @@ class Matcher:
     def _match(self, image0: ImageLike, image1: ImageLike) -> MatchResult:
         timer = StageTimer()
         start = time.perf_counter()
+        compiling = compiled.compile_seconds()
         config = self.config
         with timer("load"):
             original0, original1 = load_image(image0), load_image(image1)
@@ -137,7 +138,9 @@ class Matcher:
             "working_factors": {"image0": list(frame0.factor), "image1": list(frame1.factor)},
             "side_limits": {"min_side": min_side, "max_side": max_side},
             "counts": counts,
-            "seconds": {**timer.as_dict(), "total": round(time.perf_counter() - start, 4)},
+            # numba_compile: part of the stages' seconds, spent compiling loops (a first run; ``slime warmup``)
+            "seconds": {**timer.as_dict(), "numba_compile": round(compiled.compile_seconds() - compiling, 4),
+                        "total": round(time.perf_counter() - start, 4)},
             "warnings": warnings,
         }
         if decisions:
