@@ -47,3 +47,15 @@ def test_to_dict_with_ransac_has_the_inliers_and_the_model_under_its_name(kind):
 def test_an_empty_result_gives_empty_arrays():
     d = MatchResult(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)).to_dict()
     assert d["num_matches"] == 0 and d["confidence"].shape == (0,) and d["keypoints0"].shape == (0, 2)
+
+
+def test_indexed_gives_each_position_once_and_matches_by_index():
+    result = MatchResult(np.array([[1.0, 2.0], [1.0, 2.0], [0.5, 9.0]]), np.array([[4.0, 4.0], [5.0, 5.0], [4.0, 4.0]]),
+                         np.array([0.1, 0.2, 0.3]))
+    keypoints0, keypoints1, matches = result.indexed()
+    assert keypoints0.shape == (2, 2) and keypoints1.shape == (2, 2) and matches.shape == (3, 2)
+    assert matches.dtype == np.int64
+    np.testing.assert_array_equal(keypoints0[matches[:, 0]], result.keypoints0)
+    np.testing.assert_array_equal(keypoints1[matches[:, 1]], result.keypoints1)
+    empty = MatchResult(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0)).indexed()
+    assert empty[0].shape == (0, 2) and empty[2].shape == (0, 2)

@@ -112,6 +112,22 @@ class MatchResult:
             "image_sizes": self.image_sizes,
         }
 
+    def indexed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per-image keypoints and the matches as index pairs, as detector + matcher libraries give them.
+
+        A keypoint may take part in several matches (Slime matches overlapping blocks and tiles); each distinct
+        position appears once, in lexicographic (x, y) order.
+
+        Returns:
+            keypoints0 (N0, 2) and keypoints1 (N1, 2) float64, the distinct matched positions of each image, and
+            matches (K, 2) int64: for match k, ``keypoints0[matches[k, 0]] == self.keypoints0[k]`` and
+            ``keypoints1[matches[k, 1]] == self.keypoints1[k]`` (match order kept).
+        """
+        unique0, index0 = np.unique(self.keypoints0, axis=0, return_inverse=True)
+        unique1, index1 = np.unique(self.keypoints1, axis=0, return_inverse=True)
+        matches = np.stack([index0.reshape(-1), index1.reshape(-1)], axis=1).astype(np.int64)
+        return unique0.reshape(-1, 2), unique1.reshape(-1, 2), matches
+
     def __len__(self) -> int:
         return int(self.keypoints0.shape[0])
 
