@@ -268,7 +268,8 @@ def build_parser() -> argparse.ArgumentParser:
     make.add_argument("--overwrite", action="store_true", help="replace an existing pairs file")
     make.set_defaults(func=cmd_make_pairs)
 
-    demo = sub.add_parser("demo", help="match a bundled real stereo pair (Middlebury motorcycle) and score it")
+    demo = sub.add_parser("demo", help="match a real stereo pair (Middlebury motorcycle, from scikit-image: the "
+                                          "demo extra) and score it by its disparity")
     demo.add_argument("-o", "--output", default="slime_demo", help="output folder (default slime_demo/)")
     add_match_options(demo)
     add_workers_option(demo)
