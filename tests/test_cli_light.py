@@ -57,7 +57,7 @@ def test_quiet_prints_nothing_and_still_writes_the_outputs(pair, tmp_path, capsy
     assert code == 0 and out == "" and err == ""
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["counts"]["matches"] > 0
-    assert 0 <= summary["seconds"]["numba_compile"] <= summary["seconds"]["total"]  # compiling, within the stages
+    assert 0 <= summary["seconds"]["numba_compile"] <= summary["seconds"]["total"]  # compiling, within the call
 
 
 def test_quiet_and_verbose_together_are_a_usage_error(pair, tmp_path, capsys):

@@ -138,7 +138,8 @@ class Matcher:
             "working_factors": {"image0": list(frame0.factor), "image1": list(frame1.factor)},
             "side_limits": {"min_side": min_side, "max_side": max_side},
             "counts": counts,
-            # numba_compile: part of the stages' seconds, spent compiling loops (a first run; ``slime warmup``)
+            # numba_compile: seconds of the call spent compiling loops, within the stages or between them (a
+            # first run; ``slime warmup`` compiles ahead)
             "seconds": {**timer.as_dict(), "numba_compile": round(compiled.compile_seconds() - compiling, 4),
                         "total": round(time.perf_counter() - start, 4)},
             "warnings": warnings,
