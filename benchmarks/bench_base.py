@@ -155,7 +155,7 @@ def measure(
 
 # ---------------------------------------------------------------------------------------------- data
 def _load_graf(data: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """graf img1, img3 (uint8 BGR) and the GT homography 1 -> 3, from ../shared or Debian's opencv-doc."""
+    """graf img1, img3 (uint8 BGR) and the GT homography 1 -> 3, from the data folder or Debian's opencv-doc."""
     folder = data / "oxford_graf"
     if (folder / "img1.png").is_file():
         return (

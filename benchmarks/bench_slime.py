@@ -129,7 +129,7 @@ def fork_cost_ms(rounds: int = 5) -> float | None:
     """Median ms for this process to fork a child that exits at once (None without ``os.fork``).
 
     Slime's workers are forked processes, and a fork copies the parent's page tables: its cost grows with the
-    parent's resident set and mappings (an H100 session measured 25 ms a fork in a process holding a CUDA
+    parent's resident set and mappings (on an H100 machine a fork took 25 ms in a process holding a CUDA
     context, 62 forks a call), and huge pages (``transparent_hugepage``) cut it.
     """
     if not hasattr(os, "fork"):

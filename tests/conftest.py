@@ -1,4 +1,11 @@
-"""Shared test fixtures: paths to ../shared data and the weights cache."""
+"""Shared test fixtures: paths to the test data and weights folders beside the repository, and the skips of tests whose data or
+weights are absent.
+
+A test that needs network weights (AffNet, OriNet, TFeat, HardTFeat, HardNet, Key.Net) skips, naming them,
+when they are neither cached nor downloadable: it calls :func:`require_weights`, and any other test or fixture
+that stops on a :class:`~slime_match.errors.WeightsNotFoundError` is turned into the same skip. With
+``SLIME_REQUIRE_WEIGHTS=1`` (CI sets it) such a skip is a failure instead, so CI runs every test.
+"""
 
 import os
 from pathlib import Path
@@ -11,6 +18,8 @@ import torch.nn.functional as F
 from skimage.data import stereo_motorcycle
 
 from slime_match.cli import main
+from slime_match.errors import WeightsNotFoundError
+from slime_match.features.weights import is_cached, load_state_dict
 from slime_match.io import save_json, save_npz
 from slime_match.runs.export import PairMatches
 
@@ -22,6 +31,50 @@ WEIGHTS = SHARED / "weights"
 if WEIGHTS.is_dir():
     os.environ.setdefault("TORCH_HOME", str(WEIGHTS))
 
+REQUIRE_WEIGHTS = os.environ.get("SLIME_REQUIRE_WEIGHTS", "").strip() not in ("", "0")
+
+
+def weights_unavailable(reason: str) -> None:
+    """Skip the calling test, or fail it when ``SLIME_REQUIRE_WEIGHTS`` is set (CI must run every test)."""
+    if REQUIRE_WEIGHTS:
+        pytest.fail(f"{reason} [SLIME_REQUIRE_WEIGHTS is set: a test that needs weights must run]", pytrace=False)
+    pytest.skip(reason)
+
+
+def require_weights(*names: str) -> None:
+    """Skip the calling test (fail under ``SLIME_REQUIRE_WEIGHTS=1``) unless the weights of every model in
+    ``names`` ("affnet", "orinet", "tfeat", "hardtfeat", "hardnet", "keynet") are cached or can be downloaded
+    now (a download is tried at once when a download host resolves, without waiting for retries)."""
+    missing = []
+    for name in names:
+        if is_cached(name):
+            continue
+        try:
+            load_state_dict(name, retry_offline=False)  # caches the file when the network allows
+        except WeightsNotFoundError:
+            missing.append(name)
+    if missing:
+        weights_unavailable(f"needs the {', '.join(missing)} weights, which are not cached (TORCH_HOME="
+                            f"{os.environ.get('TORCH_HOME', 'unset')}) and could not be downloaded")
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_setup(item):
+    """A fixture that stops on missing weights skips its tests, naming them (see :func:`weights_unavailable`)."""
+    try:
+        return (yield)
+    except WeightsNotFoundError as error:
+        weights_unavailable(f"needs weights: {error}")
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item):
+    """A test that stops on missing weights is skipped, naming them (see :func:`weights_unavailable`)."""
+    try:
+        return (yield)
+    except WeightsNotFoundError as error:
+        weights_unavailable(f"needs weights: {error}")
+
 
 @pytest.fixture(params=["cpu", pytest.param("cuda", marks=pytest.mark.skipif(
     not torch.cuda.is_available(), reason="needs a CUDA GPU"))])
@@ -31,7 +84,7 @@ def device(request) -> torch.device:
 
 
 def require(path: Path) -> Path:
-    """Skip the calling test when a ../shared file it reads is absent (e.g. a user's clone)."""
+    """Skip the calling test when a data file it reads is absent (e.g. a user's clone)."""
     if not path.exists():
         pytest.skip(f"needs {path}")
     return path

@@ -18,14 +18,13 @@ from pathlib import Path
 from typing import Any
 
 from ._runtime.options import check_choice, check_integer, config_from_dict, set_option
+from .choices import DEVICES, RANSAC_CHOICES
 from .errors import ConfigError
-from .geometry.backends import RANSAC_CHOICES
 from .io import MIN_IMAGE_SIDE
 from .pipelines import PIPELINES, BaseConfig, base_names, unimplemented
 from .slime.pipeline import SlimeConfig
 from .views import ViewConfig
 
-DEVICES = ("auto", "cpu", "cuda")
 # working-size limits (px) of "auto": Slime upsamples images whose shorter side is under 480 px (its 256 px
 # tiles and the Sec. 3.6 vote need several tiles per image) and shrinks those whose longer side is over 1200
 # px (the paper's image sizes; tiles and time grow with the image); a base pipeline alone runs at full size
@@ -152,10 +151,10 @@ PRESETS: dict[str, dict[str, Any]] = {
     "slime-upright": {"method": "slime", "base": "hz+", "upright": True},
     "slime-rootsift": {"method": "slime", "base": "rootsift"},
     # the paper's SM suggests dropping block levels for speed: without the 3-blocks scale, 64 block pairs
-    # instead of 400 (see README, Performance, for what it does to speed and quality)
+    # instead of 400 (docs/performance.md, "Speed against quality", for what it does to speed and quality)
     "slime-fast": {"method": "slime", "base": "hz+", "scales": (1, 2)},
     # a fourth, finer block level for users who value coverage over time: 1600 block pairs instead of 400
-    # (see README, Performance)
+    # (docs/performance.md, "Speed against quality")
     "slime-fine": {"method": "slime", "base": "hz+", "scales": (1, 2, 3, 4)},
     "slime-keynet": {"method": "slime", "base": "keynet"},
     "slime-keynet-upright": {"method": "slime", "base": "keynet", "upright": True},

@@ -84,13 +84,17 @@ def _read_file(path: Path) -> np.ndarray:
 
 @contextmanager
 def _opencv_silent():
-    """OpenCV's own log (its C++ warnings and errors on stderr) off for the block, then back as it was."""
-    level = cv2.utils.logging.getLogLevel()
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    """OpenCV's own log (its C++ warnings and errors on stderr) off for the block, then back as it was.
+
+    OpenCV 5 exposes the level in ``cv2.utils.logging``, OpenCV 4 as ``cv2.getLogLevel`` / ``cv2.setLogLevel``;
+    level 0 is silent in both."""
+    log = getattr(cv2.utils, "logging", None) or cv2
+    level = log.getLogLevel()
+    log.setLogLevel(0)  # LOG_LEVEL_SILENT
     try:
         yield
     finally:
-        cv2.utils.logging.setLogLevel(level)
+        log.setLogLevel(level)
 
 
 def _tensor_to_hwc(tensor: torch.Tensor) -> np.ndarray:

@@ -96,6 +96,7 @@ class Matcher:
     def _match(self, image0: ImageLike, image1: ImageLike) -> MatchResult:
         timer = StageTimer()
         start = time.perf_counter()
+        compiling = compiled.compile_seconds()
         config = self.config
         with timer("load"):
             original0, original1 = load_image(image0), load_image(image1)
@@ -139,7 +140,10 @@ class Matcher:
             "working_factors": {"image0": list(frame0.factor), "image1": list(frame1.factor)},
             "side_limits": {"min_side": min_side, "max_side": max_side},
             "counts": counts,
-            "seconds": {**timer.as_dict(), "total": round(time.perf_counter() - start, 4)},
+            # numba_compile: seconds of the call spent compiling loops, within the stages or between them (a
+            # first run; ``slime warmup`` compiles ahead)
+            "seconds": {**timer.as_dict(), "numba_compile": round(compiled.compile_seconds() - compiling, 4),
+                        "total": round(time.perf_counter() - start, 4)},
             "warnings": warnings,
         }
         if decisions:

@@ -14,6 +14,20 @@ from .io import load_npz, save_json, save_npz
 from .types import GeometryResult
 
 
+def confidence_of(scores: np.ndarray) -> np.ndarray:
+    """Confidences in (0, 1], higher is better, from dissimilarity scores d (lower is better): ``1 / (1 + d)``
+    for d >= 0 (negative d count as 0). Strictly decreasing in d, so it ranks the matches exactly as the scores
+    do: 1 for d = 0, 0.5 for d = 1. The matching scores of ``slime hloc`` are these values too.
+
+    Args:
+        scores: (K,) dissimilarities.
+
+    Returns:
+        (K,) float64 confidences.
+    """
+    return 1.0 / (1.0 + np.maximum(np.asarray(scores, dtype=np.float64), 0.0))
+
+
 @dataclass
 class MatchResult:
     """Correspondences between two images, in original-image pixel coordinates.
@@ -21,7 +35,8 @@ class MatchResult:
     Attributes:
         keypoints0: (K, 2) float64 (x, y) in image 0; the centre of the top-left pixel is (0, 0).
         keypoints1: (K, 2) float64 (x, y) in image 1.
-        scores: (K,) float64 match dissimilarity (lower is better).
+        scores: (K,) float64 match dissimilarity (lower is better); :attr:`confidence` is the same ranking as
+            a confidence (higher is better).
         inliers: (K,) bool mask of the post-processing RANSAC, or None when it did not run.
         geometry_kind: "homography" / "fundamental" for ``model``, or None.
         model: (3, 3) H (image 0 -> 1) or F (x1^T F x0 = 0) from the post-processing RANSAC, or None.
@@ -56,6 +71,62 @@ class MatchResult:
         if self.image_sizes is None or self.working_sizes is None:
             return None
         return tuple((w / W, h / H) for (w, h), (W, H) in zip(self.working_sizes, self.image_sizes, strict=True))
+
+    @property
+    def confidence(self) -> np.ndarray:
+        """(K,) float64 confidences in (0, 1], higher is better: ``1 / (1 + scores)`` (:func:`confidence_of`)."""
+        return confidence_of(self.scores)
+
+    @property
+    def num_inliers(self) -> int | None:
+        """How many matches the post-processing RANSAC kept, or None when it did not run."""
+        return None if self.inliers is None else int(np.count_nonzero(self.inliers))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The result as a dict with the keys of other matching libraries (kornia, vismatch), numpy arrays:
+
+        - ``keypoints0``, ``keypoints1`` (K, 2) and their aliases ``matched_kpts0``, ``matched_kpts1``: the
+          matched keypoints, original pixels, top-left pixel centre (0, 0); ``num_matches``: K;
+        - ``confidence`` (K,), higher is better; ``scores`` (K,), the dissimilarities (lower is better);
+        - ``inliers`` (K,) bool, ``inlier_kpts0``, ``inlier_kpts1`` (N, 2), ``num_inliers`` N: the matches the
+          post-processing RANSAC kept, each None when no RANSAC ran;
+        - ``H`` (image 0 -> 1) or ``F`` (x1^T F x0 = 0), 3x3, when that RANSAC estimated one, else None;
+        - ``image_sizes``: ((W, H), (W, H)) or None.
+        """
+        model = None if self.model is None else np.asarray(self.model, dtype=np.float64)
+        inliers = None if self.inliers is None else np.asarray(self.inliers, dtype=bool)
+        return {
+            "keypoints0": self.keypoints0,
+            "keypoints1": self.keypoints1,
+            "matched_kpts0": self.keypoints0,
+            "matched_kpts1": self.keypoints1,
+            "num_matches": len(self),
+            "confidence": self.confidence,
+            "scores": self.scores,
+            "inliers": inliers,
+            "inlier_kpts0": None if inliers is None else self.keypoints0[inliers],
+            "inlier_kpts1": None if inliers is None else self.keypoints1[inliers],
+            "num_inliers": self.num_inliers,
+            "H": model if self.geometry_kind == "homography" else None,
+            "F": model if self.geometry_kind == "fundamental" else None,
+            "image_sizes": self.image_sizes,
+        }
+
+    def indexed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per-image keypoints and the matches as index pairs, as detector + matcher libraries give them.
+
+        A keypoint may take part in several matches (Slime matches overlapping blocks and tiles); each distinct
+        position appears once, in lexicographic (x, y) order.
+
+        Returns:
+            keypoints0 (N0, 2) and keypoints1 (N1, 2) float64, the distinct matched positions of each image, and
+            matches (K, 2) int64: for match k, ``keypoints0[matches[k, 0]] == self.keypoints0[k]`` and
+            ``keypoints1[matches[k, 1]] == self.keypoints1[k]`` (match order kept).
+        """
+        unique0, index0 = np.unique(self.keypoints0, axis=0, return_inverse=True)
+        unique1, index1 = np.unique(self.keypoints1, axis=0, return_inverse=True)
+        matches = np.stack([index0.reshape(-1), index1.reshape(-1)], axis=1).astype(np.int64)
+        return unique0.reshape(-1, 2), unique1.reshape(-1, 2), matches
 
     def __len__(self) -> int:
         return int(self.keypoints0.shape[0])

@@ -20,12 +20,12 @@ import cv2
 import numpy as np
 
 from ._runtime.options import check_choice, check_integer
+from .choices import VIEW_MODES
 from .errors import ConfigError
 from .geometry.frames import Frame
 
 __all__ = ["VIEW_MODES", "View", "ViewConfig", "simulate_view", "views_of_tilt"]
 
-VIEW_MODES = ("off", "auto", "always")
 ANTIALIAS = 0.8  # ASIFT's blur: sigma = ANTIALIAS * sqrt(t^2 - 1) px before subsampling x by t
 VIEW_BORDER = 2.0  # original px: keypoints of a view closer than this to the image border are dropped
 

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from conftest import DATA, WEIGHTS, random_patches, require
+from conftest import DATA, random_patches, require, require_weights
 from kornia.feature import PatchDominantGradientOrientation, SIFTDescriptor
 from kornia.filters import spatial_gradient
 
@@ -63,7 +63,7 @@ def test_dominant_orientation_equals_kornia():
 
 @pytest.mark.parametrize("name", ["affnet", "orinet", "tfeat"])
 def test_fused_networks_equal_originals(name):
-    require(WEIGHTS / "hub" / "checkpoints")
+    require_weights(name)
     net = load_model(name, None, "cpu")
     fused = fuse_for_inference(net)
     assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in fused.modules())

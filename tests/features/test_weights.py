@@ -9,12 +9,12 @@ import kornia.core.download as kdownload
 import pytest
 import torch
 import torch.nn.functional as F
-from conftest import WEIGHTS
+from conftest import require_weights
 
 from slime_match.errors import WeightsNotFoundError
 from slime_match.features.descriptors import AUTO_ORDER, Descriptor, resolve_descriptor
 from slime_match.features.laf import PatchPyramid, ellipse_to_laf
-from slime_match.features.weights import checkpoint_dir, is_cached, load_model, load_state_dict
+from slime_match.features.weights import checkpoint_dir, is_cached, load_model, load_state_dict, weights_path
 
 
 @pytest.fixture
@@ -81,9 +81,8 @@ def test_auto_descriptor_falls_back_to_rootsift_with_warning(tmp_path, no_networ
 @pytest.mark.parametrize(("present", "chosen", "passed_over"),
                          [("HardTFeat.pth", "hardtfeat", "hardnet"), ("tfeat-liberty.params", "tfeat", "hardnet, hardtfeat")])
 def test_auto_descriptor_takes_the_best_available(tmp_path, no_network, present, chosen, passed_over):
-    source = WEIGHTS / "hub" / "checkpoints" / present
-    if not source.is_file():
-        pytest.skip(f"needs {source}")
+    require_weights(chosen)
+    source = weights_path(chosen)
     shutil.copy(source, tmp_path / present)
     name, warning = resolve_descriptor("auto", tmp_path)
     assert name == chosen and f"{passed_over} unavailable, using {chosen} (learned) instead" in warning
@@ -92,8 +91,7 @@ def test_auto_descriptor_takes_the_best_available(tmp_path, no_network, present,
 def test_hardtfeat_is_tfeat_with_its_own_weights():
     """HardTFeat's checkpoint in kornia's TFeat gives the network its authors trained: per-patch normalisation,
     two convolutions with tanh and max pooling, and an 8x8 convolution with tanh as the descriptor."""
-    if not is_cached("hardtfeat"):
-        pytest.skip("needs ../shared/weights")
+    require_weights("hardtfeat")
     raw = load_state_dict("hardtfeat")["state_dict"]
     patches = torch.rand(6, 1, 32, 32)
     flat = patches.reshape(6, -1)
@@ -108,9 +106,8 @@ def test_hardtfeat_is_tfeat_with_its_own_weights():
 
 
 def test_shared_weights_load(no_network):
+    require_weights("affnet", "orinet", "tfeat", "keynet")
     for name in ("affnet", "orinet", "tfeat", "keynet"):
-        if not is_cached(name):
-            pytest.skip("needs ../shared/weights")
         assert not load_model(name).training
 
 

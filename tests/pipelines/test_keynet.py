@@ -3,12 +3,11 @@
 import numpy as np
 import pytest
 import torch
-from conftest import DATA, require
+from conftest import DATA, require, require_weights
 
 from slime_match.config import make_config
 from slime_match.errors import ConfigError
 from slime_match.eval.metrics import correct_matches_homography
-from slime_match.features.weights import is_cached
 from slime_match.io import load_image
 from slime_match.matcher import Matcher
 from slime_match.pipelines import BaseConfig, KeyNetPipeline
@@ -20,9 +19,7 @@ def graf_small():
     """graf 1 -> 3 at 0.4x resolution (320 x 256) with its exact GT homography."""
     import cv2
 
-    for name in ("keynet", "affnet", "orinet", "tfeat"):
-        if not is_cached(name):
-            pytest.skip("needs ../shared/weights")
+    require_weights("keynet", "affnet", "orinet", "tfeat")
     folder = require(DATA / "oxford_graf")
     a, b = load_image(folder / "img1.png"), load_image(folder / "img3.png")
     s = np.diag([0.4, 0.4, 1.0])

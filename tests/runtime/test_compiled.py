@@ -44,3 +44,13 @@ def test_pipelines_name_the_loops_they_run_on_the_cpu():
     hz = make_base_pipeline(make_config("hz+", **weight_free).base)
     assert hz.kernel_groups() == ("patches", "blob", "dtm") and set(hz.kernel_groups()) <= set(GROUPS)
     assert make_base_pipeline(make_config("rootsift").base).kernel_groups() == ("blob",)
+
+
+def test_compile_seconds_count_compiling_not_loading_from_the_cache(tmp_path):
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    code = CALL_A_LOOP + "; from slime_match._runtime.compiled import compile_seconds; print(compile_seconds())"
+    runs = [subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+            for _ in range(2)]
+    first, second = (float(run.stdout.split()[-1]) for run in runs)
+    assert first > 0.05 and second < first / 5  # the second run loads the loop from the cache the first wrote
+

@@ -58,14 +58,23 @@ NOTICE = ("numba is compiling slime-match's loops: first use only, up to a minut
 
 class FirstCompileNotice(event.Listener):
     """Logs :data:`NOTICE` (a warning, so that it shows by default) at the first compilation of a loop of this
-    package, in the process that created the listener."""
+    package, in the process that created the listener, and adds up the seconds numba spends compiling there
+    (:func:`compile_seconds`; a compilation inside another counts once)."""
 
     def __init__(self) -> None:
         self.pid = os.getpid()
         self.shown = False
+        self.depth = 0
+        self.started = 0.0
+        self.seconds = 0.0
 
     def on_start(self, e: event.Event) -> None:
-        if self.shown or os.getpid() != self.pid:
+        if os.getpid() != self.pid:
+            return
+        if self.depth == 0:
+            self.started = time.perf_counter()
+        self.depth += 1
+        if self.shown:
             return
         dispatcher = (e.data or {}).get("dispatcher")
         module = getattr(getattr(dispatcher, "py_func", None), "__module__", None) or ""
@@ -74,7 +83,11 @@ class FirstCompileNotice(event.Listener):
             log.warning(NOTICE)
 
     def on_end(self, e: event.Event) -> None:
-        pass
+        if os.getpid() != self.pid or self.depth == 0:
+            return
+        self.depth -= 1
+        if self.depth == 0:
+            self.seconds += time.perf_counter() - self.started
 
 
 _installed: list[FirstCompileNotice] = []
@@ -85,3 +98,9 @@ def install_notice() -> None:
     if not _installed:
         _installed.append(FirstCompileNotice())
         event.register("numba:compile", _installed[0])
+
+
+def compile_seconds() -> float:
+    """Seconds numba has spent compiling in this process since :func:`install_notice` (0 before it, and in
+    forked workers, whose compilations their own processes pay)."""
+    return _installed[0].seconds if _installed and _installed[0].pid == os.getpid() else 0.0

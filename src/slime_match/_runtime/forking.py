@@ -30,6 +30,8 @@ from typing import Any
 
 import torch
 
+from . import progress
+
 
 @contextmanager
 def torch_threads(count: int) -> Iterator[None]:
@@ -62,9 +64,19 @@ def fork_map(fn: Callable[[int], Any], count: int, workers: int) -> list:
     raised by ``fn`` in a child is raised here again (its remote traceback as the cause).
     """
     size = min(workers, count)
+    bar = progress.bar(count)
     if size <= 1 or "fork" not in multiprocessing.get_all_start_methods():
-        with torch_threads(1):  # as every process below: the same float rounding for any number of workers
-            return [fn(k) for k in range(count)]
+        results = []
+        try:
+            with torch_threads(1):  # as every process below: the same float rounding for any number of workers
+                for k in range(count):
+                    results.append(fn(k))
+                    if bar is not None:
+                        bar.update(1)
+        finally:
+            if bar is not None:
+                bar.close()
+        return results
     context = multiprocessing.get_context("fork")
     taken = context.Value("l", 0)  # calls handed out so far, in memory shared by the forks
 
@@ -83,22 +95,49 @@ def fork_map(fn: Callable[[int], Any], count: int, workers: int) -> list:
             taken.value = count
 
     pipes = [context.Pipe(duplex=False) for _ in range(size - 1)]  # rank r >= 1 writes to pipes[r - 1]
+    watcher = None
     children: list[int] = []
     try:
         _fork_subtree(0, size, pipes, run, stop, children)
         for _, writer in pipes:
             writer.close()
+        watcher = _watch(bar, taken, count)  # started after the forks: the children never hold its thread
         with torch_threads(1):
             parts = run()
         for reader, _ in pipes:
             parts += _received(reader)
     finally:
         stop()
+        if watcher is not None:
+            watcher()
         for reader, writer in pipes:
             reader.close()
             writer.close()
         _reap_later(children)
     return [result for _, result in sorted(parts, key=lambda done: done[0])]
+
+
+def _watch(bar: Any, taken: Any, count: int) -> Callable[[], None] | None:
+    """Move ``bar`` (None: no bar) with the calls handed out to the processes (``taken``), five times a second,
+    in a thread of this process; returns the function that stops the thread and closes the bar."""
+    if bar is None:
+        return None
+    done = threading.Event()
+
+    def follow() -> None:
+        while not done.wait(0.2):
+            bar.update(max(min(taken.value, count) - bar.n, 0))
+
+    thread = threading.Thread(target=follow, name="slime-progress", daemon=True)
+    thread.start()
+
+    def finish() -> None:
+        done.set()
+        thread.join()
+        bar.update(count - bar.n)
+        bar.close()
+
+    return finish
 
 
 def _reap_later(pids: list[int]) -> None:

@@ -2,12 +2,9 @@
 
 libgomp, the OpenMP runtime of PyTorch's Linux CPU wheels, lets a waiting worker thread spin 300,000 times
 before it sleeps. When other processes keep the cores busy, the spinning thread holds a core while the thread
-it waits for is descheduled. Measured on a 2-core machine next to a two-process background job, two torch
-threads: feature extraction of Slime's blocks of one 320x240 image took 35 s with the default spin and 1.3 s
-with OMP_WAIT_POLICY=PASSIVE; blocks and tiles of a graf 640x480 pair, weight-free then TFeat, took 3.7 s and
-9.4 s with 1,000 spins, while the default did not finish both in 300 s. Idle, 1,000 spins and the default give
-the same times (2.0 s and 5.0 s); PASSIVE costs 0.3-0.9 s there. 1,000 is libgomp's own value when threads
-outnumber cores.
+it waits for is descheduled, and torch's CPU work can slow down by one to two orders of magnitude
+(docs/performance.md, "Busy machines"). 1,000 spins, libgomp's own value when threads outnumber cores, leave
+the idle times unchanged.
 
 libgomp reads the variable once, when torch loads it. The default is therefore set only when torch is not
 imported yet, and never over the user's own GOMP_SPINCOUNT or OMP_WAIT_POLICY. Importing the package does not

@@ -10,6 +10,8 @@ from contextlib import contextmanager
 
 import torch
 
+from . import progress
+
 logger = logging.getLogger("slime_match")
 
 # callbacks told of every stage as it starts, ``(stage, None)``, and ends, ``(stage, seconds)`` (progress)
@@ -48,7 +50,8 @@ class StageTimer:
         _tell(stage, None)
         start = time.perf_counter()
         try:
-            yield
+            with progress.stage(stage):
+                yield
         finally:
             _sync()
             elapsed = time.perf_counter() - start

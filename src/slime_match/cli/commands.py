@@ -9,7 +9,8 @@ import sys
 from pathlib import Path
 
 from .. import __version__
-from .._runtime import openmp
+from .._runtime import openmp, progress
+from ..choices import CAMERA_MODES
 from ..errors import ConfigError, SlimeMatchError, caused_by_interrupt
 from .match_options import add_match_options, add_workers_option, config_of, positive_int
 
@@ -31,10 +32,12 @@ def cmd_match(args: argparse.Namespace) -> int:
 
     config = config_of(args)
     image0, image1 = load_image(args.image0), load_image(args.image1)  # bad input fails before model loading
+    progress.enable(not args.quiet)
     result = Matcher(config)(image0, image1)
     out = Path(args.output)
     write_pair_outputs(result, image0, image1, out, plot=not args.no_plot)
-    _report(result, out)
+    if not args.quiet:
+        _report(result, out)
     return 0
 
 
@@ -45,8 +48,10 @@ def cmd_pairs(args: argparse.Namespace) -> int:
     jobs = read_pairs(args.pairs, args.images)  # a bad pairs file or a missing image fails before any work
     cache_mb = FEATURE_CACHE_MB if args.feature_cache_mb is None else args.feature_cache_mb
     records = match_pairs(config_of(args), jobs, args.output, workers=args.workers, overwrite=args.overwrite,
-                          plot=args.plot, feature_cache_mb=cache_mb)
+                          plot=args.plot, feature_cache_mb=cache_mb, progress=not args.quiet)
     count = {status: sum(r["status"] == status for r in records) for status in ("done", "skipped", "failed")}
+    if args.quiet:
+        return 1 if count["failed"] else 0
     print(f"{len(records)} pairs: {count['done']} matched, {count['skipped']} already done, "
           f"{count['failed']} failed -> {Path(args.output) / INDEX_FILE}")
     matched = [r for r in records if r["status"] == "done" and "feature_sets" in r]
@@ -79,8 +84,8 @@ def cmd_make_pairs(args: argparse.Namespace) -> int:
 def cmd_demo(args: argparse.Namespace) -> int:
     """Match scikit-image's Middlebury motorcycle stereo pair and score it with its disparity map."""
     import numpy as np
-    from skimage.data import stereo_motorcycle
 
+    from ..eval.datasets.motorcycle import stereo_motorcycle
     from ..eval.metrics import disparity_error
     from ..matcher import Matcher
     from ..runs.outputs import write_pair_outputs
@@ -92,6 +97,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     for path, image in zip(paths, (left, right)):
         _write_rgb(path, image)
     image0, image1 = left.astype(np.float32) / 255.0, right.astype(np.float32) / 255.0
+    progress.enable(not args.quiet)
     result = Matcher(config_of(args))(image0, image1)
     error = disparity_error(result.keypoints0, result.keypoints1, disparity)
     known = np.isfinite(error)
@@ -102,6 +108,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         "precision": float(correct.sum() / max(int(known.sum()), 1)),
     }
     write_pair_outputs(result, image0, image1, out)
+    if args.quiet:
+        return 0
     _report(result, out)
     gt = result.summary["ground_truth"]
     print(f"ground truth (disparity): {gt['correct_15px']} of {gt['matches_with_known_disparity']} matches "
@@ -117,6 +125,47 @@ def _write_rgb(path: Path, rgb) -> None:
         raise OSError(f"could not write {path}")
 
 
+def cmd_warmup(args: argparse.Namespace) -> int:
+    """Compile every compiled loop of the package ahead of the first match (or load them from numba's disk
+    cache): each group's warm-up, then one weight-free Slime match of a small synthetic pair, which runs the
+    loops of every Slime stage in this process."""
+    import os
+    import time
+
+    from .._runtime import compiled
+    from ..config import make_config
+    from ..matcher import Matcher
+
+    start = time.perf_counter()
+    seconds = compiled.warm_up()
+    image0, image1 = _synthetic_pair()
+    config = make_config("slime", shape="baumberg", orientation="gradient", descriptor="rootsift", device="cpu",
+                         workers=1)
+    result = Matcher(config)(image0, image1)
+    total = time.perf_counter() - start
+    groups = ", ".join(f"{group} {value:.1f} s" for group, value in seconds.items())
+    cache = os.environ.get("NUMBA_CACHE_DIR") or "numba's default: __pycache__ beside the package's modules"
+    print(f"compiled loops ready in {total:.1f} s ({groups}; a Slime match of a synthetic pair with "
+          f"{len(result)} matches, {total - sum(seconds.values()):.1f} s); cache: {cache}")
+    return 0
+
+
+def _synthetic_pair(size: tuple[int, int] = (480, 640)):
+    """A textured (H, W, 3) float32 image and the same image under a known mild homography (a rotation by 8
+    degrees and a 0.9 scaling about the centre): enough matches for every Slime stage to run."""
+    import cv2
+    import numpy as np
+
+    height, width = size
+    noise = np.random.default_rng(0).random((height, width, 3), dtype=np.float32)
+    image0 = cv2.GaussianBlur(noise, (0, 0), 2.0)
+    image0 = (image0 - image0.min()) / (image0.max() - image0.min())
+    rotation = cv2.getRotationMatrix2D((width / 2, height / 2), 8.0, 0.9)
+    image1 = cv2.warpAffine(image0, rotation, (width, height), flags=cv2.INTER_LINEAR,
+                            borderMode=cv2.BORDER_REFLECT)
+    return image0, image1
+
+
 def cmd_viz(args: argparse.Namespace) -> int:
     from ..slime.visualize import render_stages
 
@@ -124,6 +173,12 @@ def cmd_viz(args: argparse.Namespace) -> int:
     for path in written:
         print(path)
     return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from ..eval.bench import cmd_bench as run_bench
+
+    return run_bench(args)
 
 
 def cmd_colmap(args: argparse.Namespace) -> int:
@@ -220,11 +275,17 @@ def build_parser() -> argparse.ArgumentParser:
     make.add_argument("--overwrite", action="store_true", help="replace an existing pairs file")
     make.set_defaults(func=cmd_make_pairs)
 
-    demo = sub.add_parser("demo", help="match a bundled real stereo pair (Middlebury motorcycle) and score it")
+    demo = sub.add_parser("demo", help="match a real stereo pair (Middlebury motorcycle, from scikit-image: the "
+                                          "demo extra) and score it by its disparity")
     demo.add_argument("-o", "--output", default="slime_demo", help="output folder (default slime_demo/)")
     add_match_options(demo)
     add_workers_option(demo)
     demo.set_defaults(func=cmd_demo)
+
+    warmup = sub.add_parser("warmup", help="compile the package's loops (numba) ahead of the first match; they "
+                                           "are cached in NUMBA_CACHE_DIR when set")
+    warmup.add_argument("-v", "--verbose", action="store_true", help="log the warm-up match's stages")
+    warmup.set_defaults(func=cmd_warmup)
 
     viz = sub.add_parser("viz", help="draw Slime stages saved by `slime match --save-stages`")
     viz.add_argument("stages", help="stages.npz")
@@ -233,8 +294,6 @@ def build_parser() -> argparse.ArgumentParser:
     viz.add_argument("-o", "--output", required=True, help="output folder for the PNGs")
     viz.add_argument("--stage", action="append", default=None, help="stage name(s) to draw (default: all)")
     viz.set_defaults(func=cmd_viz)
-
-    from ..runs.colmap import CAMERA_MODES
 
     colmap = sub.add_parser("colmap", help="a `slime pairs` run as a COLMAP database and its sparse "
                                            "reconstruction (needs pycolmap)")
@@ -271,9 +330,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="largest image upload accepted (default 25)")
     web.set_defaults(func=cmd_web)
 
-    from ..eval.bench import add_bench_parser
+    from ..eval.bench_args import add_bench_parser
 
-    add_bench_parser(sub)
+    add_bench_parser(sub, cmd_bench)
 
     return parser
 
@@ -295,7 +354,8 @@ def main(argv: list[str] | None = None) -> int:
     from .._runtime import compiled
 
     compiled.install_notice()
-    level = logging.DEBUG if args.debug else logging.INFO if getattr(args, "verbose", False) else logging.WARNING
+    level = (logging.DEBUG if args.debug else logging.INFO if getattr(args, "verbose", False)
+             else logging.ERROR if getattr(args, "quiet", False) else logging.WARNING)
     logging.basicConfig(level=level, format="%(levelname)s: %(message)s")
     logging.getLogger("slime_match").setLevel(level)  # also when the root logger was configured before
     try:

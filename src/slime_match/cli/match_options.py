@@ -5,23 +5,24 @@ from __future__ import annotations
 
 import argparse
 
+from ..choices import (
+    BUILTIN_BASES,
+    DESCRIPTOR_CHOICES,
+    DETECTIONS,
+    DEVICES,
+    ORIENTATION_CHOICES,
+    RANSAC_CHOICES,
+    SHAPE_METHODS,
+    TILE_TESTS,
+    VIEW_MODES,
+)
 from ..errors import ConfigError
 
 
 def add_match_options(parser: argparse.ArgumentParser) -> None:
-    from ..config import DEVICES, methods
-    from ..features.descriptors import DESCRIPTOR_CHOICES
-    from ..features.orientation import ORIENTATION_CHOICES
-    from ..features.shape import SHAPE_METHODS
-    from ..geometry.backends import RANSAC_CHOICES
-    from ..pipelines import base_names
-    from ..slime.levels import DETECTIONS
-    from ..slime.refine import TILE_TESTS
-    from ..views import VIEW_MODES
-
-    parser.add_argument("--method", default=None, choices=methods(),
+    parser.add_argument("--method", default=None, choices=("slime", *BUILTIN_BASES),
                         help="Slime (default) or a base pipeline alone")
-    parser.add_argument("--base", default=None, choices=base_names(),
+    parser.add_argument("--base", default=None, choices=BUILTIN_BASES,
                         help="base pipeline run inside Slime (default hz+)")
     parser.add_argument("--descriptor", default=None, choices=DESCRIPTOR_CHOICES,
                         help="Hz+ / Key.Net descriptor; auto = the best whose weights are available: HardNet, "
@@ -38,8 +39,11 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=None, help="random seed (RANSAC sampling; default 0)")
     parser.add_argument("--device", default=None, choices=DEVICES, help="default auto: CUDA when available")
     parser.add_argument("--weights-dir", default=None, help="folder with model weights (else TORCH_HOME cache)")
-    parser.add_argument("-v", "--verbose", action="store_true",
-                        help="log each stage as it finishes (seconds) and Slime's block and tile layout")
+    loudness = parser.add_mutually_exclusive_group()
+    loudness.add_argument("-v", "--verbose", action="store_true",
+                          help="log each stage as it finishes (seconds) and Slime's block and tile layout")
+    loudness.add_argument("-q", "--quiet", action="store_true",
+                          help="print nothing but errors: no warnings, no progress bar, no result line")
     parser.add_argument("--min-side", type=parse_side, default=None, metavar="PX|none",
                         help="upsample (Lanczos3) images whose shorter side is smaller to this many px before "
                              "matching (default auto: 480 for Slime, whose tiles need it; none for a base "
@@ -50,10 +54,10 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
                              "alone); wins over --min-side; matches come back in original pixels")
     parser.add_argument("--magnification", type=float, default=None,
                         help="patch size over the detected region (default 6 over HarrisZ+ ellipses, 1 over "
-                             "Key.Net frames); smaller patches give a weaker base (docs/coverage.md)")
+                             "Key.Net frames); smaller patches give a weaker base")
     parser.add_argument("--scales", type=parse_scales, default=None,
                         help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper; "
-                             "1,2 is about 2.5x faster, 1,2,3,4 covers more at about 2.5x the time; see the README)")
+                             "1,2 is about 2.5x faster, 1,2,3,4 covers more at about 2.5x the time)")
     parser.add_argument("--detection", default=None, choices=DETECTIONS,
                         help="Slime: how blocks get keypoints: 'merged' (the hz+ default) detects every block "
                              "crop on its own and describes shared keypoints once, 'block' also describes per "

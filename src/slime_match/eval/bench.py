@@ -34,9 +34,10 @@ from typing import Any
 from tqdm import tqdm
 
 from slime_match.errors import ConfigError
+from slime_match.eval import bench_args
 from slime_match.eval.bench_config import BenchConfig
 from slime_match.eval.code_version import code_version
-from slime_match.eval.methods import PAPER_METHODS, make_method, method_label
+from slime_match.eval.methods import make_method, method_label
 from slime_match.eval.predictions import _load_prediction, collect_pairs, load_pair_images, pair_slug, predict
 from slime_match.eval.scoring import evaluate_pair, evaluate_protocol, pair_gt, pair_protocol
 from slime_match.io import save_json, save_npz
@@ -157,50 +158,6 @@ def _csv(text: str) -> list[str]:
     return [s.strip() for s in text.split(",") if s.strip()]
 
 
-def add_bench_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    """Register ``bench`` on a ``subparsers`` object (``slime bench``); sets ``func`` to :func:`cmd_bench`."""
-    p = subparsers.add_parser(
-        "bench",
-        help="run methods over datasets and write the paper's metric tables",
-        description="Run methods over datasets, cache predictions (resumable) and write tables, charts "
-        "and maps. Method specs: name[:key=value,...], e.g. 'hz+:descriptor=tfeat'.",
-    )
-    p.add_argument(
-        "datasets",
-        nargs="+",
-        help="dataset specs: graf, hpatches, scannet-sample, motorcycle, "
-        "planar:<dir>, hpatches:<dir>, oxford:<dir>, evd:<dir>, wxbs:<dir>, megadepth1500:<root>, "
-        "scannet1500:<root>",
-    )
-    p.add_argument(
-        "--methods",
-        default=",".join(PAPER_METHODS),
-        help="comma- or space-separated method specs (default: the paper's set); "
-        "separate specs with options by ';'",
-    )
-    p.add_argument("-o", "--output", default="results", help="results folder")
-    p.add_argument("--thresholds", default="none,5,3,2,1", help="post-processing RANSAC thresholds (px)")
-    p.add_argument("--rotations", default="", help="rotated variants to add, degrees, e.g. 90,180,270")
-    p.add_argument("--rotate-kinds", default="homography", help="pair kinds that get rotated variants")
-    p.add_argument("--max-pairs", type=int, default=None, help="first N pairs of each dataset")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"])
-    p.add_argument("--ransac-backend", default="slime", choices=["slime", "magsac", "poselib"])
-    p.add_argument("--map-pairs", type=int, default=2, help="pairs that get coverage/error maps")
-    p.add_argument("--data-root", default=None, help="root of the bundled data (default ../shared/data)")
-    p.add_argument(
-        "--protocol-datasets",
-        default="evd,wxbs",
-        help="dataset names whose pairs also get their standard protocol (EVD for homography pairs, WxBS for "
-        "pairs with GT correspondences), e.g. evd,wxbs,planar; '' = none",
-    )
-    p.add_argument("--protocol-h-threshold", type=float, default=3.0, help="EVD protocol MAGSAC++ threshold (px)")
-    p.add_argument("--protocol-f-threshold", type=float, default=3.0, help="WxBS protocol MAGSAC++ threshold (px)")
-    p.add_argument("--protocol-max-iters", type=int, default=10000, help="MAGSAC++ iterations of the protocols")
-    p.set_defaults(func=cmd_bench)
-    return p
-
-
 def _split_methods(text: str) -> list[str]:
     """';' separates specs when any spec has options (their options use ','); else ',' or spaces."""
     if ";" in text or ":" in text:
@@ -244,6 +201,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
             f"solved, {len(v['no_match_pairs'])} without matches{empty}"
         )
     return 0
+
+
+def add_bench_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register ``bench`` on a ``subparsers`` object, running :func:`cmd_bench`."""
+    return bench_args.add_bench_parser(subparsers, cmd_bench)
 
 
 def main(argv: list[str] | None = None) -> int:

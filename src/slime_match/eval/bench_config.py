@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from slime_match.choices import PAPER_METHODS
 from slime_match.errors import ConfigError
 from slime_match.eval import metrics as M
-from slime_match.eval.methods import PAPER_METHODS, method_label, parse_method_spec
+from slime_match.eval.methods import method_label, parse_method_spec
 
 
 @dataclass
@@ -28,7 +29,7 @@ class BenchConfig:
         t_perp: correctness / coverage / mAA threshold in px.
         homography_step: grid step in px of the planar accuracy error.
         map_pairs: pairs (the first N) that get coverage and error maps.
-        data_root: root of the bundled data (None: ``$SLIME_MATCH_DATA`` or ``../shared/data``).
+        data_root: root of the bundled data (None: ``$SLIME_MATCH_DATA``, see ``datasets.load.default_data_root``).
         protocol_datasets: dataset names (spec before ':') whose pairs are also scored by the standard
             protocol of their ground truth (:mod:`slime_match.eval.metrics.protocols`): EVD for homography
             pairs, WxBS for pairs with GT correspondences.

@@ -179,20 +179,6 @@ REGISTRY: dict[str, tuple[str, Callable[..., MethodFn]]] = {
     "disk-lightglue": ("DISK + LightGlue", lambda **o: KorniaDiskLightGlue(**o)),
 }
 
-PAPER_METHODS = (
-    "rootsift",
-    "rootsift-upright",
-    "slime-rootsift",
-    "keynet",
-    "keynet-upright",
-    "slime-keynet",
-    "slime-keynet-upright",
-    "hz+",
-    "hz+-upright",
-    "slime",
-    "slime-upright",
-    "opencv-sift",
-)
 
 
 def _value(text: str) -> Any:

@@ -14,14 +14,13 @@ from pathlib import Path
 import torch
 import torch.nn.functional as F
 
+from slime_match.choices import DESCRIPTOR_METHODS
 from slime_match.errors import ConfigError, WeightsNotFoundError
 from slime_match.features.gradients import SIFTPatchDescriptor
 from slime_match.features.inference import fuse_for_inference
 from slime_match.features.laf import PatchPyramid
 from slime_match.features.weights import is_cached, load_model, load_state_dict
 
-DESCRIPTOR_METHODS = ("hardnet", "hardtfeat", "tfeat", "rootsift")
-DESCRIPTOR_CHOICES = ("auto", *DESCRIPTOR_METHODS)  # what a configuration may name; "auto": see resolve_descriptor
 AUTO_ORDER = DESCRIPTOR_METHODS  # "auto" takes the first available: HardNet, HardTFeat, TFeat, then RootSIFT
 
 

@@ -1,24 +1,9 @@
 """Keypoint ellipses to described local features: LAF, affine shape, orientation, descriptor.
 
 Features keep frames at the detector's scale (the unit circle of ``laf`` is the adapted ellipse); the
-patches of every stage span ``magnification`` times that frame. Measured with HarrisZ+ keypoints,
-AffNet + OriNet + TFeat, mutual nearest neighbours; correct = two-sided reprojection error < 15 px
-(correct / mutual matches):
-
-    ============  ==================  ==================  ======================
-    magnification oxford_graf 1->2    oxford_graf 1->3    hpatches v_churchill 1->3
-    ============  ==================  ==================  ======================
-    1             791 / 1388          395 / 1160          -
-    2             1431 / 1755         909 / 1415          -
-    3             1615 / 1856         1150 / 1557         1631 / 2890
-    4             1689 / 1935         1219 / 1601         1979 / 3090
-    5             1698 / 1901         1268 / 1599         2236 / 3187
-    6             1711 / 1899         1268 / 1599         2320 / 3169
-    ============  ==================  ==================  ======================
-
-The default is the best, 6; the gain flattens after 4-5 on graf. These are planar scenes, which favour
-large supports; Slime on a base at 4 covers the same planar area but has a lower pose AUC on the non-planar
-ScanNet sample, so 6 stays its default too (docs/coverage.md).
+patches of every stage span ``magnification`` times that frame (``PatchConfig.magnification``, 6 by default
+over HarrisZ+ ellipses: larger supports give more correct matches, flattening after 4-5; the measurements are
+in docs/quality.md, "Patch magnification").
 """
 
 from __future__ import annotations

@@ -3,9 +3,8 @@
 The kornia networks (AffNet, OriNet, HardNet) alternate ``Conv2d -> BatchNorm2d -> ReLU``. In eval mode a
 batch norm is an affine map per channel, so it folds exactly into the preceding convolution's weights and
 bias; with the weights in channels-last layout, oneDNN also skips its per-layer reorders; activations run
-in place (TFeat's full-resolution Tanh was 15% of its time). Measured on this
-2-core CPU, batches of 4000 32x32 patches, one thread: AffNet 760 -> 2970 patches/s, OriNet 770 -> 2820.
-The outputs equal the original's to float rounding (~1e-6); the network's own ``forward`` is kept.
+in place. The throughput of each network, folded and not: docs/performance.md ("CPU figures"). The outputs
+equal the original's to float rounding (~1e-6); the network's own ``forward`` is kept.
 """
 
 from __future__ import annotations

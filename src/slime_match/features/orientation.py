@@ -14,14 +14,12 @@ from pathlib import Path
 
 import torch
 
+from slime_match.choices import ORIENTATION_METHODS
 from slime_match.errors import ConfigError
 from slime_match.features.gradients import DominantGradientOrientation
 from slime_match.features.inference import fuse_for_inference
 from slime_match.features.laf import PatchPyramid, rotate_laf, set_laf_angle, upright_laf
 from slime_match.features.weights import load_model
-
-ORIENTATION_METHODS = ("orinet", "gradient", "upright", "fixed")
-ORIENTATION_CHOICES = ORIENTATION_METHODS[:3]  # what a configuration may name ("fixed" is Slime's own)
 
 
 @dataclass

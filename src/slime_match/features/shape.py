@@ -12,6 +12,7 @@ from pathlib import Path
 
 import torch
 
+from slime_match.choices import SHAPE_METHODS
 from slime_match.errors import ConfigError
 from slime_match.features.gradients import patch_gradients
 from slime_match.features.inference import fuse_for_inference
@@ -19,7 +20,6 @@ from slime_match.features.laf import PatchPyramid, laf_scale, upright_laf
 from slime_match.features.patch_kernels import second_moments
 from slime_match.features.weights import load_model
 
-SHAPE_METHODS = ("affnet", "baumberg")
 # Frames per Baumberg step: no network, so large steps amortise the per-call overhead (16 MiB of patches).
 _BAUMBERG_CHUNK = 4096
 

@@ -5,15 +5,13 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from slime_match.choices import RANSAC_BACKENDS as BACKENDS
+from slime_match.choices import RANSAC_KINDS as KINDS
 from slime_match.errors import ConfigError
 from slime_match.geometry.fundamental_ransac import ransac_fundamental
 from slime_match.geometry.ransac import FundamentalRansacConfig, HomographyRansacConfig, ransac_homography
 from slime_match.types import GeometryResult
 
-KINDS = ("homography", "fundamental")
-BACKENDS = ("slime", "magsac", "poselib")
-# a configuration's post-processing RANSAC: none, or a kind by the paper's RANSACs or backend-kind
-RANSAC_CHOICES = ("none", *KINDS, *(f"{backend}-{kind}" for backend in BACKENDS[1:] for kind in KINDS))
 _MIN_SAMPLE = {"homography": 4, "fundamental": 8}
 _MAX_ITERATIONS = 10_000
 _CONFIDENCE = 0.999

@@ -36,10 +36,8 @@ import torch
 
 from .._runtime.compiled import warm_up
 from .._runtime.options import check_choice, check_integer
+from ..choices import DESCRIPTOR_CHOICES, ORIENTATION_CHOICES, SHAPE_METHODS
 from ..errors import ConfigError
-from ..features.descriptors import DESCRIPTOR_CHOICES
-from ..features.orientation import ORIENTATION_CHOICES
-from ..features.shape import SHAPE_METHODS
 from ..matching.blob import BlobConfig
 from ..matching.dtm import DTMConfig
 from ..types import Features, Keypoints, Matches

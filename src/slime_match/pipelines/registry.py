@@ -14,6 +14,7 @@ import dataclasses
 
 import torch
 
+from ..choices import BUILTIN_BASES
 from ..errors import ConfigError
 from .base import BaseConfig, BasePipeline, unimplemented
 from .hzplus import HzPlusPipeline
@@ -61,8 +62,7 @@ def make_base_pipeline(config: BaseConfig, device: torch.device | str = "cpu") -
     return PIPELINES[config.name](config, torch.device(device))
 
 
-register_pipeline("hz+", HzPlusPipeline)
-register_pipeline("rootsift", RootSiftPipeline)
-register_pipeline("keynet", KeyNetPipeline)
+for _name, _cls in zip(BUILTIN_BASES, (HzPlusPipeline, RootSiftPipeline, KeyNetPipeline), strict=True):
+    register_pipeline(_name, _cls)
 
 BASE_NAMES = base_names()  # the built-in pipelines, which are also methods that run one base alone

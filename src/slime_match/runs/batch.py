@@ -107,8 +107,8 @@ def _slug(name: str) -> str:
 
 
 def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathLike, workers: int = 1,
-                overwrite: bool = False, plot: bool = False, feature_cache_mb: float = FEATURE_CACHE_MB
-                ) -> list[dict[str, Any]]:
+                overwrite: bool = False, plot: bool = False, feature_cache_mb: float = FEATURE_CACHE_MB,
+                progress: bool = True) -> list[dict[str, Any]]:
     """Match every pair into ``output/<folder>/``, skipping the pairs already finished there.
 
     The pairs are matched in the order that best reuses each worker's feature cache
@@ -147,7 +147,7 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
         else:
             todo.append(index)
     progress = tqdm(total=len(jobs), initial=len(records), desc="pairs", unit="pair", file=sys.stderr,
-                    disable=None)
+                    disable=None if progress else True)  # None: a bar only when stderr is a terminal
     if workers == 1 or len(todo) <= 1:
         finished = _match_in_process(matcher, jobs, todo, out, plot)
     else:

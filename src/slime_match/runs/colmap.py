@@ -20,6 +20,8 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from slime_match.choices import CAMERA_MODES
+
 from ..errors import ConfigError, ImageError, SlimeMatchError
 from ..io import save_json
 from .export import (
@@ -38,7 +40,6 @@ logger = logging.getLogger("slime_match")
 DATABASE_FILE = "database.db"
 VERIFIED_PAIRS_FILE = "pairs.txt"
 SPARSE_FOLDER = "sparse"
-CAMERA_MODES = ("auto", "single", "per-folder", "per-image")
 
 
 # The eight ways a file's EXIF orientation turns its stored pixels (raw, h x w) into the upright image:

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..io import image_size, save_json
+from ..result import confidence_of
 from .export import check_export_folder, check_images, merge_keypoints, read_run, staged_folder
 from .outputs import SUMMARY_FILE
 from .pair_lists import write_pairs
@@ -38,8 +39,9 @@ def pair_key(name0: str, name1: str) -> str:
 
 
 def similarity(scores: np.ndarray) -> np.ndarray:
-    """hloc's matching scores (higher is better, in (0, 1]) from slime-match's dissimilarities d >= 0: 1 / (1 + d)."""
-    return (1.0 / (1.0 + np.maximum(scores, 0.0))).astype(np.float32)
+    """hloc's matching scores (higher is better, in (0, 1]): the matches' confidences, 1 / (1 + d) of their
+    dissimilarities d (:func:`slime_match.result.confidence_of`), as float32."""
+    return confidence_of(scores).astype(np.float32)
 
 
 def _h5py():

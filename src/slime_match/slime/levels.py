@@ -24,6 +24,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from slime_match.choices import DETECTIONS
+
 from .._runtime.forking import fork_map, torch_threads
 from ..features.image_ops import resize_lanczos
 from ..pipelines import BasePipeline
@@ -68,7 +70,6 @@ class ScaleLevel:
     origin: tuple[float, float] = (0.0, 0.0)
 
 
-DETECTIONS = ("scale", "block", "merged")
 MERGE_RADIUS = 1.0  # scaled px: keypoints of one detector level this close (per coordinate) are one keypoint
 
 

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from slime_match.choices import TILE_TESTS
+
 from ..geometry.homography import two_sided_error_batch
 from ..matching.dtm import DTMConfig, dtm_filter
 from ..pipelines import BasePipeline
@@ -76,7 +78,6 @@ class PlaneGuide:
         return ((error < self.threshold) & (np.sign(w) == self.sides[planes][:, None])).any(axis=0)
 
 
-TILE_TESTS = ("plane", "flow")  # Sec. 3.8's test; "flow" is the paper's, "plane" the default
 
 
 def tile_test(kind: str, flow: FlowGuide, plane: PlaneGuide
@@ -233,15 +234,12 @@ def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size
     Exact duplicate matches are merged first. Overlapping blocks and tiles leave clusters of matches a few
     pixels apart; DTM runs on one representative per cluster (``cluster_representatives``) and the members
     share its verdict. Within such clusters Delaunay neighbourhoods follow the keypoints' localisation noise,
-    not the scene, so they disagree between the images, and contraction erodes correct matches until the
-    core is too small for expansion to recover from: on the raw clusters Oxford graf 1 -> 4 kept 19 of
-    12,375 correct matches; with representatives of 2 px grid cells graf 1 -> 3 rotated by 270 deg still
-    kept 39 of 17,379 (12,012 with the 4 px greedy clusters).
+    not the scene, so they disagree between the images, and DTM's contraction would erode correct matches
+    until too few are left for its expansion to recover (docs/method.md, Sec. 3.8).
 
     The hull is not carved with unmatched keypoints (the base DTM's ``unmatched0/1``): the candidates come
     from block levels and tiles, so no keypoint set is "the others" of them, and carving with the tile
-    keypoints collapsed graf 1 -> 6 rotated by 45 deg from 2312 correct input matches to 248 kept (1409
-    uncarved); over the 15 planar pairs it cost 0.007 coverage.
+    keypoints removes correct matches on strongly rotated pairs.
 
     Args:
         xy0, xy1: (K, 2) match ends in px; scores: (K,) lower is better; size0, size1: (H, W) image sizes.

@@ -270,9 +270,8 @@ def _add_routes(app: FastAPI, state: _State) -> None:
 
     @app.get("/api/info")
     def info():
-        from ..config import DEVICES, PRESETS
-        from ..features.descriptors import DESCRIPTOR_CHOICES
-        from ..geometry.backends import RANSAC_CHOICES
+        from ..choices import DESCRIPTOR_CHOICES, DEVICES, RANSAC_CHOICES
+        from ..config import PRESETS
 
         return {"version": __version__,
                 "folders": [{"name": r.name, "kind": r.kind} for r in state.roots],

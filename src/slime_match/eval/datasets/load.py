@@ -14,7 +14,8 @@ from slime_match.eval.datasets.wxbs import read_wxbs
 
 
 def default_data_root() -> Path:
-    """Folder of the bundled test data: ``$SLIME_MATCH_DATA`` or ``<repository>/../shared/data``."""
+    """Folder of the named datasets: ``$SLIME_MATCH_DATA``, else a ``shared/data`` folder beside the source
+    checkout or beside the current folder."""
     env = os.environ.get("SLIME_MATCH_DATA")
     if env:
         return Path(env)

@@ -1,0 +1,46 @@
+"""The names that options accept, defined once for the code that implements them and for the command line.
+
+This module imports nothing, so that building the ``slime`` command's parser (``slime --help``,
+``slime --version``) loads neither torch, numba nor OpenCV. Each tuple is re-exported by the module that
+implements its choices (``features.descriptors.DESCRIPTOR_CHOICES`` ...).
+"""
+
+DEVICES = ("auto", "cpu", "cuda")
+
+# the base pipelines built into the package, in their registration order (``pipelines.registry``); each is also
+# a method that runs that pipeline alone. Pipelines registered at run time are known to the Python API only.
+BUILTIN_BASES = ("hz+", "rootsift", "keynet")
+
+SHAPE_METHODS = ("affnet", "baumberg")
+ORIENTATION_METHODS = ("orinet", "gradient", "upright", "fixed")
+ORIENTATION_CHOICES = ORIENTATION_METHODS[:3]  # what a configuration may name ("fixed" is Slime's own)
+DESCRIPTOR_METHODS = ("hardnet", "hardtfeat", "tfeat", "rootsift")
+DESCRIPTOR_CHOICES = ("auto", *DESCRIPTOR_METHODS)  # "auto": the best available (features.descriptors)
+
+RANSAC_KINDS = ("homography", "fundamental")
+RANSAC_BACKENDS = ("slime", "magsac", "poselib")
+# a configuration's post-processing RANSAC: none, or a kind by the paper's RANSACs or backend-kind
+RANSAC_CHOICES = ("none", *RANSAC_KINDS,
+                  *(f"{backend}-{kind}" for backend in RANSAC_BACKENDS[1:] for kind in RANSAC_KINDS))
+
+DETECTIONS = ("scale", "block", "merged")  # how Slime's blocks get keypoints (slime.levels)
+TILE_TESTS = ("plane", "flow")  # Sec. 3.8's test of tile matches; "flow" is the paper's, "plane" the default
+VIEW_MODES = ("off", "auto", "always")  # simulated views of image 0 (views.ViewConfig)
+
+CAMERA_MODES = ("auto", "single", "per-folder", "per-image")  # COLMAP camera sharing (runs.colmap)
+
+# the methods of the paper's comparison, the default of ``slime bench --methods`` (eval.methods)
+PAPER_METHODS = (
+    "rootsift",
+    "rootsift-upright",
+    "slime-rootsift",
+    "keynet",
+    "keynet-upright",
+    "slime-keynet",
+    "slime-keynet-upright",
+    "hz+",
+    "hz+-upright",
+    "slime",
+    "slime-upright",
+    "opencv-sift",
+)
