@@ -38,14 +38,17 @@ class ViewConfig:
         mode: "auto" (views only when the plain run finds too little consistent geometry, one tilt after
             another until it does), "always" (every tilt), "off".
         tilts: the tilts tried, in order (each with the rotations ``views_of_tilt`` gives it).
-        min_support: "auto" adds views while the run's best consistent set has fewer matches than this: for
-            Slime the matches of F^theta (the planes the epipolar vote kept, Secs. 3.6-3.7), for a base
-            pipeline alone those consistent with one fundamental matrix (OpenCV MAGSAC++, 3 px).
+        min_support: Slime's "auto" adds views while F^theta (the planes the epipolar vote kept, Secs.
+            3.6-3.7) holds fewer matches than this.
+        min_inliers: a base pipeline alone adds views while fewer of its matches than this are consistent
+            with one fundamental matrix (OpenCV MAGSAC++, 3 px; a base alone finds far fewer matches than
+            Slime).
     """
 
     mode: str = "auto"
     tilts: tuple[float, ...] = (2.0, 4.0)
     min_support: int = 100
+    min_inliers: int = 50
 
     def __post_init__(self) -> None:
         self.tilts = tuple(float(t) for t in self.tilts)
@@ -54,6 +57,7 @@ class ViewConfig:
     def validate(self) -> ViewConfig:
         check_choice("views.mode", self.mode, VIEW_MODES)
         check_integer("views.min_support", self.min_support, 1)
+        check_integer("views.min_inliers", self.min_inliers, 8)
         if not all(t > 1.0 for t in self.tilts):
             raise ConfigError(f"views.tilts must all be > 1 (1 is the image itself), got {self.tilts}")
         return self

@@ -2,7 +2,7 @@
 
 Each view of image 0 is detected, described and matched against image 1's features (computed once); its
 matches are mapped back to image 0 through the view's affine map and pooled with the plain matches. "auto"
-adds the views of one tilt after another only while the pooled matches have fewer than ``min_support``
+adds the views of one tilt after another only while the pooled matches have fewer than ``min_inliers``
 consistent with one fundamental matrix (OpenCV MAGSAC++, 3 px).
 """
 
@@ -48,8 +48,8 @@ def match_views(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, 
 
     def enough() -> str:
         support = consistent_matches(*(np.concatenate([p[k] for p in parts]) for k in (0, 1)), seed)
-        return f"{support} matches consistent with one F (>= {config.min_support})" \
-            if support >= config.min_support else ""
+        return f"{support} matches consistent with one F (>= {config.min_inliers})" \
+            if support >= config.min_inliers else ""
 
     for tilt in config.tilts:
         if config.mode == "auto" and (reason := enough()):
