@@ -60,7 +60,7 @@ def main() -> None:
                      "record": result.summary["decisions"]["views"], "matches": len(result)})
         print(json.dumps(runs[-1]), flush=True)
     evd = args.data / "hard" / "evd"
-    for name in args.pairs.split(","):
+    for name in filter(None, args.pairs.split(",")):
         a, b = load_image(evd / "1" / f"{name}.png"), load_image(evd / "2" / f"{name}.png")
         h = np.loadtxt(evd / "h" / f"{name}.txt")
         for mode, matcher in matchers.items():

@@ -6,8 +6,8 @@ Gaussian of ``0.8 sqrt(t^2 - 1)`` px) and subsample x by ``t``; the rotations ar
 degrees in [0, 180) (ASIFT's sampling). Matching a simulated view of image 0 against image 1 compensates a
 strong tilt between the two that neither the detector's affine shapes nor the block scales can.
 
-Where views are used: Slime's block stage (``slime.views_stage``: each view is one more set of block levels)
-and a base pipeline alone (``view_matching``). Both add them adaptively by default (:class:`ViewConfig`):
+Where views are used: Slime's block stage (``slime.view_planes``: each view is one more set of block levels)
+and a base pipeline alone (``pipelines.view_matching``). Both add them adaptively by default (:class:`ViewConfig`):
 only when the plain run finds too little consistent geometry, one tilt after another.
 """
 
@@ -24,7 +24,7 @@ from .choices import VIEW_MODES
 from .errors import ConfigError
 from .geometry.frames import Frame
 
-__all__ = ["VIEW_MODES", "View", "ViewConfig", "simulate_view", "views_of_tilt"]
+__all__ = ["VIEW_MODES", "View", "ViewConfig", "ViewRecord", "simulate_view", "view_geometry", "views_of_tilt"]
 
 ANTIALIAS = 0.8  # ASIFT's blur: sigma = ANTIALIAS * sqrt(t^2 - 1) px before subsampling x by t
 VIEW_BORDER = 2.0  # original px: keypoints of a view closer than this to the image border are dropped
@@ -93,9 +93,6 @@ class View:
         size = np.array(self.original_size, np.float64)
         return np.all((xy >= margin - 0.5) & (xy <= size - 0.5 - margin), axis=1)
 
-    def describe(self) -> str:
-        return f"tilt {self.tilt:g}, {self.angle:g} deg"
-
 
 def view_geometry(size: tuple[int, int], tilt: float, angle: float) -> View:
     """The view of an image of (W, H) ``size`` rotated by ``angle`` degrees and compressed along x by ``tilt``:
@@ -103,8 +100,7 @@ def view_geometry(size: tuple[int, int], tilt: float, angle: float) -> View:
     if tilt < 1.0:
         raise ValueError(f"a tilt is >= 1, got {tilt}")
     width, height = size
-    a = math.radians(angle)
-    rotation = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
+    rotation = _rotation(angle)
     corners = np.array([[-0.5, -0.5], [width - 0.5, -0.5], [-0.5, height - 0.5], [width - 0.5, height - 0.5]])
     turned = corners @ rotation.T
     low, high = turned.min(0), turned.max(0)
@@ -127,11 +123,9 @@ def simulate_view(image: np.ndarray, tilt: float, angle: float) -> tuple[np.ndar
     """
     height, width = image.shape[:2]
     view = view_geometry((width, height), tilt, angle)
-    a = math.radians(angle)
-    rotation = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
     rotated_width = math.ceil(tilt * view.size[0] - 1e-9) if tilt > 1 else view.size[0]
-    linear = np.reshape(view.affine, (2, 3))
-    rotate = np.c_[rotation, np.diag([tilt, 1.0]) @ (linear[:, 2] + 0.5) - 0.5]  # the view's map before the x step
+    offset = np.reshape(view.affine, (2, 3))[:, 2]
+    rotate = np.c_[_rotation(angle), np.diag([tilt, 1.0]) @ (offset + 0.5) - 0.5]  # the view's map before the x step
     source = np.ascontiguousarray(image, dtype=np.float32)
     rotated = cv2.warpAffine(source, rotate, (rotated_width, view.size[1]), flags=cv2.INTER_LINEAR,
                              borderMode=cv2.BORDER_REFLECT_101)
@@ -144,6 +138,12 @@ def simulate_view(image: np.ndarray, tilt: float, angle: float) -> tuple[np.ndar
     step = np.array([[1.0 / tilt, 0.0, 0.5 / tilt - 0.5], [0.0, 1.0, 0.0]])
     out = cv2.warpAffine(blurred, step, view.size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT_101)
     return out.reshape(out.shape[:2] + image.shape[2:]), view
+
+
+def _rotation(angle: float) -> np.ndarray:
+    """(2, 2) rotation by ``angle`` degrees, counter-clockwise as displayed (y down)."""
+    a = math.radians(angle)
+    return np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
 
 
 def views_of_tilt(tilt: float) -> list[float]:

@@ -41,7 +41,7 @@ def test_slime_view_planes_hold_the_pairs_geometry(graf_small):  # noqa: F811
 
 
 def test_auto_views_stop_when_the_plain_run_agrees(graf_small):  # noqa: F811
-    a, b, h = graf_small
+    a, b, _ = graf_small
     result = Matcher(make_config("slime", scales=(1, 2), **WEIGHT_FREE))(a, b)
     views = result.summary["decisions"]["views"]
     assert views["mode"] == "auto" and views["views"] == 0 and views["tilts"] == []

@@ -19,9 +19,8 @@ recall curve, :mod:`slime_match.eval.metrics.protocols`).
 
 from __future__ import annotations
 
-import json
-
 import argparse
+import json
 import logging
 import math
 import re

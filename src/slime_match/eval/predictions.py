@@ -4,7 +4,6 @@ rotated variants, images, one prediction in the original frame, and a saved pred
 from __future__ import annotations
 
 import json
-
 import re
 from dataclasses import replace
 from pathlib import Path

@@ -4,6 +4,7 @@ its own, with its counts.
 Stages and where they live:
     3.1 blocks and tiles ............ :mod:`.blocks`; their features: :mod:`.levels` (:mod:`.level_cache`)
     3.2-3.3 block planes ............ :mod:`.block_planes` (:mod:`.fixed_descriptors`, :mod:`.jobs`)
+    simulated views (ours) .......... :mod:`.view_planes` (their planes join the block planes)
     3.4 expansion and pruning ....... :mod:`.expansion`
     3.5 tile sets ................... :mod:`.tile_sets`
     3.6 the epipolar vote ........... :mod:`.epipolar_vote`
@@ -35,8 +36,8 @@ from .level_cache import LevelCache, feature_levels
 from .levels import DETECTIONS, LevelRequest
 from .refine import TILE_TESTS, FlowGuide, PlaneGuide, TileMatches, final_matches, match_tiles, tile_test
 from .selection import PlaneSelection, select_planes
-from .view_planes import view_planes
 from .tile_sets import TileConfig
+from .view_planes import view_planes
 
 logger = logging.getLogger("slime_match")
 
@@ -211,6 +212,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         else:
             record.reason = (_geometry_found(selection, views) if views.mode == "auto" else "") or "every tilt tried"
         logger.info("Views: %s", record.reason)
+    logger.info("Sec. 3.6: %s", selection.vote_reason)
     table = planes.table
     ftheta = selection.ftheta
     in_ftheta = ftheta.union()
