@@ -39,7 +39,8 @@ class ViewConfig:
             another until it does), "always" (every tilt), "off".
         tilts: the tilts tried, in order (each with the rotations ``views_of_tilt`` gives it).
         min_support: Slime's "auto" adds views while F^theta (the planes the epipolar vote kept, Secs.
-            3.6-3.7) holds fewer matches than this.
+            3.6-3.7) holds fewer matches than this; when no tilt reaches it, the views' planes are dropped
+            and the image's own planes decide (views that find no stronger geometry only compete with them).
         min_inliers: a base pipeline alone adds views while fewer of its matches than this are consistent
             with one fundamental matrix (OpenCV MAGSAC++, 3 px; a base alone finds far fewer matches than
             Slime).

@@ -40,15 +40,23 @@ def test_slime_view_planes_hold_the_pairs_geometry(graf_small):  # noqa: F811
     assert ok.mean() >= 0.9 and ok.sum() > 500
 
 
-def test_auto_views_stop_when_the_plain_run_agrees(graf_small):  # noqa: F811
+def test_auto_views_stop_when_the_plain_run_agrees_and_leave_it_when_they_find_nothing_stronger(graf_small):  # noqa: F811
     a, b, _ = graf_small
-    result = Matcher(make_config("slime", scales=(1, 2), **WEIGHT_FREE))(a, b)
+    options = {"scales": (1, 2), **WEIGHT_FREE}
+    result = Matcher(make_config("slime", **options))(a, b)
     views = result.summary["decisions"]["views"]
     assert views["mode"] == "auto" and views["views"] == 0 and views["tilts"] == []
     assert views["reason"].startswith("F^theta has")
-    off = Matcher(make_config("slime", scales=(1, 2), views="off", **WEIGHT_FREE))(a, b)
-    np.testing.assert_array_equal(off.keypoints0, result.keypoints0)  # auto without views = off
+    off = Matcher(make_config("slime", views="off", **options))(a, b)
     assert off.summary["decisions"]["views"]["reason"] == "views off"
+    # views that never reach the support asked for are tried, and their planes dropped: the plain run's matches
+    unreached = Matcher(make_config("slime", **{"views.tilts": (2.0,), "views.min_support": 10**9}, **options))(a, b)
+    record = unreached.summary["decisions"]["views"]
+    assert record["views"] == 5 and record["tilts"] == [2.0] and "alone are kept" in record["reason"]
+    for other in (result, unreached):  # auto without views, or with views dropped = off
+        np.testing.assert_array_equal(other.keypoints0, off.keypoints0)
+        np.testing.assert_array_equal(other.keypoints1, off.keypoints1)
+        np.testing.assert_array_equal(other.scores, off.scores)
 
 
 def test_base_pipeline_pools_its_views_matches(graf_small):  # noqa: F811

@@ -193,6 +193,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     expansion, selection = _select(planes, layout, config, workers, timer)
     record = ViewRecord(views.mode)
     if views.mode != "off":
+        plain = planes, expansion, selection
         blocks0 = list(layout.blocks0)
         for tilt in views.tilts:
             if views.mode == "auto":
@@ -210,7 +211,11 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
             logger.info("Views of tilt %g: %d views, %d planes", tilt, found.views, len(found.planes.H))
             expansion, selection = _select(planes, layout, config, workers, timer)
         else:
-            record.reason = (_geometry_found(selection, views) if views.mode == "auto" else "") or "every tilt tried"
+            record.reason = _geometry_found(selection, views) if views.mode == "auto" else "every tilt tried"
+            if not record.reason:  # the views found no stronger geometry either: their planes only compete
+                planes, expansion, selection = plain
+                record.reason = (f"no tilt gave F^theta {views.min_support} matches: the planes of the image "
+                                 "alone are kept")
         logger.info("Views: %s", record.reason)
     logger.info("Sec. 3.6: %s", selection.vote_reason)
     table = planes.table
