@@ -39,7 +39,8 @@ def match_views(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, 
     image 0 that ``config`` asks for.
 
     Returns:
-        (K, 2), (K, 2) matches in image px and their (K,) scores, plain ones first, and what was tried.
+        (K, 2), (K, 2) matches in image px and their (K,) scores, sorted by score (lower is better), and what
+        was tried.
     """
     record = ViewRecord(config.mode)
     if config.mode == "off":
