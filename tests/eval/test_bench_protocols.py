@@ -64,7 +64,7 @@ def test_protocols_per_pair_dataset_and_console(hard_run, capsys):
         assert f"{dataset} {label}: {protocol.upper()} mAA {row['maa']:.2f}, {row['solved']}/2 pairs solved" in console
     table = (out / "table.md").read_text()
     assert "### Standard protocols (raw matches, OpenCV MAGSAC++)" in table
-    assert "MAGSAC++ 3 px" in table and "### Standard protocols per pair (pair mAA)" in table
+    assert "MAGSAC++ 3 px" in table and "### Standard protocols per pair (pair mAA" in table
     assert sum(line.startswith(("| evd/", "| wxbs/")) for line in table.splitlines()) == 4
 
 
@@ -84,6 +84,24 @@ def test_pairs_without_matches_are_counted_and_listed(hard_run, tmp_path, capsys
     assert summary["pairs"][2]["methods"][label]["protocol"] == {"maa": 0.0, "recall": [0.0] * 20}
     assert f"1 without matches ({name})" in console
     assert f"| {name} |" in (out / "table.md").read_text().split("per pair")[0]
+
+
+def test_the_views_a_run_added_are_kept_and_shown_per_pair(hard_run):
+    """A prediction's recorded decisions (summary.json's) reach metrics.json and the per-pair protocol table."""
+    out, argv = hard_run
+    bench.main(argv)
+    summary = json.loads((out / "metrics.json").read_text())
+    label, name = next(iter(summary["methods"])), summary["pairs"][0]["name"]
+    path = out / "predictions" / label / f"{pair_slug(name)}.npz"
+    saved = dict(np.load(path))
+    views = {"mode": "auto", "tilts": [2.0, 4.0], "views": 15, "reason": "every tilt tried"}
+    np.savez(path, **saved | {"decisions": np.str_(json.dumps({"views": views}))})
+    assert bench.main(argv) == 0
+    summary = json.loads((out / "metrics.json").read_text())
+    assert summary["pairs"][0]["methods"][label]["views"] == views
+    assert "views" not in summary["pairs"][1]["methods"][label]  # SIFT records none
+    rows = [line for line in (out / "table.md").read_text().splitlines() if line.startswith(f"| {name} |")]
+    assert rows[-1].endswith("(views: tilt 2, 4) |"), rows
 
 
 def test_protocol_options():
