@@ -89,6 +89,18 @@ def test_slime_tile_test_option(pair, tmp_path, capsys):
     assert code == 2 and "'tile_test' is a Slime option" in err and not (tmp_path / "r").exists()
 
 
+def test_stage_lines_by_default_and_help_groups(pair, tmp_path, capsys):
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift", "--no-plot")
+    assert code == 0, err
+    lines = [line for line in err.splitlines() if line.endswith(" s")]
+    assert [line.split(":")[0] for line in lines] == ["load", "features", "matching", "views"], err
+    with pytest.raises(SystemExit):
+        main(["match", "--help"])
+    text = capsys.readouterr().out
+    groups = text.index("\nmatching:"), text.index("\nSlime and base pipeline internals")
+    assert groups[0] < text.index("\n  --descriptor") < groups[1] < text.index("\n  --detection")
+
+
 def test_views_option(pair, tmp_path, capsys):
     code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--method", "hz+", *WEIGHT_FREE, "--views", "always",
                            "--set", "views.tilts=2", "--no-plot")
@@ -350,7 +362,7 @@ def test_ctrl_c_inside_compiled_code_is_an_interruption(pair, tmp_path, capsys, 
     with pytest.raises(KeyboardInterrupt):  # the API raises what the user pressed
         Matcher(make_config("slime", shape="baumberg", orientation="gradient", descriptor="rootsift"))(*pair)
     code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "out", *WEIGHT_FREE)
-    assert code == 130 and err.strip() == "interrupted"
+    assert code == 130 and err.strip().splitlines()[-1] == "interrupted"  # after the stage lines that finished
     assert not (tmp_path / "out").exists()
 
 

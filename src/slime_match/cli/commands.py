@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from .. import __version__
@@ -33,12 +35,30 @@ def cmd_match(args: argparse.Namespace) -> int:
     config = config_of(args)
     image0, image1 = load_image(args.image0), load_image(args.image1)  # bad input fails before model loading
     progress.enable(not args.quiet)
-    result = Matcher(config)(image0, image1)
+    with _stage_lines(args):
+        result = Matcher(config)(image0, image1)
     out = Path(args.output)
     write_pair_outputs(result, image0, image1, out, plot=not args.no_plot)
     if not args.quiet:
         _report(result, out)
     return 0
+
+
+@contextmanager
+def _stage_lines(args: argparse.Namespace) -> Iterator[None]:
+    """Within the block, each matching stage on stderr as it finishes, with its seconds: by default; ``-v``
+    logs them with the rest, ``-q`` prints nothing."""
+    if args.quiet or args.verbose:
+        yield
+        return
+    from .._runtime.timing import stage_listener
+
+    def line(stage: str, seconds: float | None) -> None:
+        if seconds is not None:
+            print(f"{stage}: {seconds:.2f} s", file=sys.stderr, flush=True)
+
+    with stage_listener(line):
+        yield
 
 
 def cmd_pairs(args: argparse.Namespace) -> int:
@@ -98,7 +118,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
         _write_rgb(path, image)
     image0, image1 = left.astype(np.float32) / 255.0, right.astype(np.float32) / 255.0
     progress.enable(not args.quiet)
-    result = Matcher(config_of(args))(image0, image1)
+    with _stage_lines(args):
+        result = Matcher(config_of(args))(image0, image1)
     error = disparity_error(result.keypoints0, result.keypoints1, disparity)
     known = np.isfinite(error)
     correct = known & (error < 15.0)

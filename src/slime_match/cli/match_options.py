@@ -20,64 +20,70 @@ from ..errors import ConfigError
 
 
 def add_match_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--method", default=None, choices=("slime", *BUILTIN_BASES),
-                        help="Slime (default) or a base pipeline alone")
-    parser.add_argument("--base", default=None, choices=BUILTIN_BASES,
-                        help="base pipeline run inside Slime (default hz+)")
-    parser.add_argument("--descriptor", default=None, choices=DESCRIPTOR_CHOICES,
-                        help="Hz+ / Key.Net descriptor; auto = the best whose weights are available: HardNet, "
-                             "HardTFeat (TFeat trained with HardNet's loss), TFeat, then RootSIFT (weight-free; "
-                             "not for Key.Net)")
-    parser.add_argument("--shape", default=None, choices=SHAPE_METHODS, help="Hz+ affine shape")
-    parser.add_argument("--orientation", default=None, choices=ORIENTATION_CHOICES,
-                        help="Hz+ patch orientation")
-    parser.add_argument("--upright", action="store_true", default=None,
-                        help="no orientation estimation (the paper's upright variants)")
-    parser.add_argument("--ransac", default=None, choices=RANSAC_CHOICES, help="post-processing RANSAC (default none)")
-    parser.add_argument("--threshold", type=float, default=None,
-                        help="inlier threshold in px of the --ransac post-processing (default 3)")
-    parser.add_argument("--seed", type=int, default=None, help="random seed (RANSAC sampling; default 0)")
-    parser.add_argument("--device", default=None, choices=DEVICES, help="default auto: CUDA when available")
-    parser.add_argument("--weights-dir", default=None, help="folder with model weights (else TORCH_HOME cache)")
-    loudness = parser.add_mutually_exclusive_group()
+    """The matching options, in help groups: the everyday ones, the output's loudness, and Slime's and the base
+    pipelines' internals (the paper's parameters)."""
+    everyday = parser.add_argument_group("matching")
+    internals = parser.add_argument_group(
+        "Slime and base pipeline internals", "the paper's parameters and their variants; any other by --set")
+    everyday.add_argument("--method", default=None, choices=("slime", *BUILTIN_BASES),
+                          help="Slime (default) or a base pipeline alone")
+    internals.add_argument("--base", default=None, choices=BUILTIN_BASES,
+                           help="base pipeline run inside Slime (default hz+)")
+    everyday.add_argument("--descriptor", default=None, choices=DESCRIPTOR_CHOICES,
+                          help="Hz+ / Key.Net descriptor; auto = the best whose weights are available: HardNet, "
+                               "HardTFeat (TFeat trained with HardNet's loss), TFeat, then RootSIFT (weight-free; "
+                               "not for Key.Net)")
+    internals.add_argument("--shape", default=None, choices=SHAPE_METHODS, help="Hz+ affine shape")
+    internals.add_argument("--orientation", default=None, choices=ORIENTATION_CHOICES,
+                           help="Hz+ patch orientation")
+    internals.add_argument("--upright", action="store_true", default=None,
+                           help="no orientation estimation (the paper's upright variants)")
+    everyday.add_argument("--ransac", default=None, choices=RANSAC_CHOICES, help="post-processing RANSAC (default none)")
+    everyday.add_argument("--threshold", type=float, default=None,
+                          help="inlier threshold in px of the --ransac post-processing (default 3)")
+    everyday.add_argument("--seed", type=int, default=None, help="random seed (RANSAC sampling; default 0)")
+    everyday.add_argument("--device", default=None, choices=DEVICES, help="default auto: CUDA when available")
+    everyday.add_argument("--weights-dir", default=None, help="folder with model weights (else TORCH_HOME cache)")
+    loudness = parser.add_argument_group("output").add_mutually_exclusive_group()
     loudness.add_argument("-v", "--verbose", action="store_true",
-                          help="log each stage as it finishes (seconds) and Slime's block and tile layout")
+                          help="log every step: the stages with their seconds, Slime's block and tile layout, "
+                               "the views and the vote (by default only each stage's seconds)")
     loudness.add_argument("-q", "--quiet", action="store_true",
                           help="print nothing but errors: no warnings, no progress bar, no result line")
-    parser.add_argument("--min-side", type=parse_side, default=None, metavar="PX|none",
-                        help="upsample (Lanczos3) images whose shorter side is smaller to this many px before "
-                             "matching (default auto: 480 for Slime, whose tiles need it; none for a base "
-                             "pipeline alone); matches come back in original pixels")
-    parser.add_argument("--max-side", type=parse_side, default=None, metavar="PX|none",
-                        help="shrink images whose longer side is larger to this many px before matching "
-                             "(default auto: 1200 for Slime, as the paper's images; none for a base pipeline "
-                             "alone); wins over --min-side; matches come back in original pixels")
-    parser.add_argument("--magnification", type=float, default=None,
-                        help="patch size over the detected region (default 6 over HarrisZ+ ellipses, 1 over "
-                             "Key.Net frames); smaller patches give a weaker base")
-    parser.add_argument("--scales", type=parse_scales, default=None,
-                        help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper; "
-                             "1,2 is about 2.5x faster, 1,2,3,4 covers more at about 2.5x the time)")
-    parser.add_argument("--detection", default=None, choices=DETECTIONS,
-                        help="Slime: how blocks get keypoints: 'merged' (the hz+ default) detects every block "
-                             "crop on its own and describes shared keypoints once, 'block' also describes per "
-                             "crop (the paper's prototype, slower), 'scale' detects once per block scale "
-                             "(fastest, the RootSIFT and Key.Net default; fewer matches in low-texture scenes)")
-    parser.add_argument("--tile-test", default=None, choices=TILE_TESTS,
-                        help="Slime: which full-resolution tile matches to keep: 'plane' (the default: fits the "
-                             "plane's homography over the whole tile pair, more coverage), 'flow' (the paper's: "
-                             "near a match of the selected planes)")
-    parser.add_argument("--views", default=None, choices=VIEW_MODES,
-                        help="simulated views of image 0 for extreme viewpoints (ASIFT tilts 2 then 4, for Slime "
-                             "and a base pipeline alone): 'auto' (default) only when the plain run finds too "
-                             "little consistent geometry, 'always', 'off'; summary.json records the views tried")
-    parser.add_argument("--set", dest="settings", action="append", default=[], type=parse_setting,
-                        metavar="OPTION=VALUE",
-                        help="any option by its dotted path, e.g. slime.tiles.t_xi=12 or base.blob.shortlist_k=5 "
-                             "(repeatable; every path is in a run's summary.json, under config)")
-    parser.add_argument("--config", default=None, metavar="SUMMARY.json",
-                        help="start from the configuration a run recorded (its summary.json) instead of the "
-                             "method's preset; the options given here change it")
+    everyday.add_argument("--min-side", type=parse_side, default=None, metavar="PX|none",
+                          help="upsample (Lanczos3) images whose shorter side is smaller to this many px before "
+                               "matching (default auto: 480 for Slime, whose tiles need it; none for a base "
+                               "pipeline alone); matches come back in original pixels")
+    everyday.add_argument("--max-side", type=parse_side, default=None, metavar="PX|none",
+                          help="shrink images whose longer side is larger to this many px before matching "
+                               "(default auto: 1200 for Slime, as the paper's images; none for a base pipeline "
+                               "alone); wins over --min-side; matches come back in original pixels")
+    internals.add_argument("--magnification", type=float, default=None,
+                           help="patch size over the detected region (default 6 over HarrisZ+ ellipses, 1 over "
+                                "Key.Net frames); smaller patches give a weaker base")
+    internals.add_argument("--scales", type=parse_scales, default=None,
+                           help="Slime block scales, blocks along the shorter side (default 1,2,3 as the paper; "
+                                "1,2 is about 2.5x faster, 1,2,3,4 covers more at about 2.5x the time)")
+    internals.add_argument("--detection", default=None, choices=DETECTIONS,
+                           help="Slime: how blocks get keypoints: 'merged' (the hz+ default) detects every block "
+                                "crop on its own and describes shared keypoints once, 'block' also describes per "
+                                "crop (the paper's prototype, slower), 'scale' detects once per block scale "
+                                "(fastest, the RootSIFT and Key.Net default; fewer matches in low-texture scenes)")
+    internals.add_argument("--tile-test", default=None, choices=TILE_TESTS,
+                           help="Slime: which full-resolution tile matches to keep: 'plane' (the default: fits the "
+                                "plane's homography over the whole tile pair, more coverage), 'flow' (the paper's: "
+                                "near a match of the selected planes)")
+    everyday.add_argument("--views", default=None, choices=VIEW_MODES,
+                          help="simulated views of image 0 for extreme viewpoints (ASIFT tilts 2 then 4, for Slime "
+                               "and a base pipeline alone): 'auto' (default) only when the plain run finds too "
+                               "little consistent geometry, 'always', 'off'; summary.json records the views tried")
+    internals.add_argument("--set", dest="settings", action="append", default=[], type=parse_setting,
+                           metavar="OPTION=VALUE",
+                           help="any option by its dotted path, e.g. slime.tiles.t_xi=12 or base.blob.shortlist_k=5 "
+                                "(repeatable; every path is in a run's summary.json, under config)")
+    internals.add_argument("--config", default=None, metavar="SUMMARY.json",
+                           help="start from the configuration a run recorded (its summary.json) instead of the "
+                                "method's preset; the options given here change it")
 
 
 def add_workers_option(parser: argparse.ArgumentParser) -> None:
