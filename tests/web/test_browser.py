@@ -97,7 +97,7 @@ def until(condition, timeout: float = 60.0, what: str = "the page"):
 
 def open_page(browser, server):
     browser.get(server + "/")
-    until(lambda: browser.execute_script("return document.body.dataset.ready === '1'"), 30, "the page to load")
+    until(lambda: browser.execute_script("return document.body.dataset.ready === '1'"), 60, "the page to load")
 
 
 def pick(browser, side: int, name: str) -> None:
@@ -110,7 +110,7 @@ def pick(browser, side: int, name: str) -> None:
 
 
 def settle(browser) -> None:
-    until(lambda: not browser.execute_script("return slimeWeb.busy()"), 10, "the page to settle")
+    until(lambda: not browser.execute_script("return slimeWeb.busy()"), 60, "the page to settle")
     browser.execute_script("slimeWeb.view.draw()")
 
 
@@ -135,10 +135,10 @@ def test_match_two_images_see_count_and_stage_layers(browser, server, shots):
     browser.find_element("id", "opt-scales").send_keys("1,2")
     Select(browser.find_element("id", "opt-ransac")).select_by_value("fundamental")
     browser.find_element("id", "run").click()
-    until(lambda: browser.execute_script("return slimeWeb.S.job !== null"), 10, "the job")
+    until(lambda: browser.execute_script("return slimeWeb.S.job !== null"), 60, "the job")
 
     # the page stays interactive while the worker matches: redraws and requests answer at once
-    until(lambda: "running" in browser.find_element("id", "status").text, 20, "the job to run")
+    until(lambda: "running" in browser.find_element("id", "status").text, 60, "the job to run")
     probes = []
     while "running" in browser.find_element("id", "status").text and len(probes) < 40:
         start = time.perf_counter()
@@ -163,13 +163,13 @@ def test_match_two_images_see_count_and_stage_layers(browser, server, shots):
     stages = [li.text for li in browser.find_elements("css selector", "#progress li")]
     assert any(s.startswith("features:") for s in stages) and any(s.startswith("global_dtm:") for s in stages)
 
-    until(lambda: browser.find_elements("id", "layer-planes"), 20, "the stage layers")
+    until(lambda: browser.find_elements("id", "layer-planes"), 60, "the stage layers")
     settle(browser)
     browser.save_screenshot(str(shots / "match-done.png"))
     # a keypoint clicked shows its match
     x, y = browser.execute_script("return slimeWeb.S.matches.keypoints0[0];")
     pointer(browser, 0, x, y)
-    until(lambda: "match(es)" in browser.find_element("id", "info").text, 5, "the clicked match")
+    until(lambda: "match(es)" in browser.find_element("id", "info").text, 60, "the clicked match")
     assert 0 in browser.execute_script("return slimeWeb.S.selected;")
     # a stage layer toggled on draws; hovering a plane shows its homography
     browser.find_element("id", "show-matches").click()
@@ -177,7 +177,7 @@ def test_match_two_images_see_count_and_stage_layers(browser, server, shots):
     assert browser.execute_script("return slimeWeb.S.layers.planes === true;")
     px, py = browser.execute_script("return slimeWeb.S.stages.layers.planes.xy0[0];")
     pointer(browser, 0, px, py, click=False)
-    until(lambda: "H (image 0 -> 1)" in browser.find_element("id", "info").text, 5, "the plane's homography")
+    until(lambda: "H (image 0 -> 1)" in browser.find_element("id", "info").text, 60, "the plane's homography")
     settle(browser)
     browser.save_screenshot(str(shots / "stage-planes.png"))
     browser.find_element("id", "layer-planes").click()
@@ -185,7 +185,7 @@ def test_match_two_images_see_count_and_stage_layers(browser, server, shots):
     browser.find_element("id", "layer-ftheta").click()
     fx, fy = browser.execute_script("return slimeWeb.S.stages.layers.ftheta.xy0[0];")
     pointer(browser, 0, fx, fy, click=False)  # a set of F^theta: its matches, tile pair and plane
-    until(lambda: "of ftheta, tile pair" in browser.find_element("id", "info").text, 5, "the hovered set")
+    until(lambda: "of ftheta, tile pair" in browser.find_element("id", "info").text, 60, "the hovered set")
     settle(browser)
     browser.save_screenshot(str(shots / "stage-tiles-ftheta.png"))
     assert browser.execute_script("return slimeWeb.S.layers.tiles && !slimeWeb.S.layers.planes;")
@@ -194,11 +194,11 @@ def test_match_two_images_see_count_and_stage_layers(browser, server, shots):
 def test_twenty_thousand_matches_zoom_and_pan_smoothly(browser, server, shots):
     open_page(browser, server)
     browser.find_element("id", "tab-runs").click()
-    until(lambda: browser.find_elements("id", "open-pair-0"), 10, "the run's pairs")
+    until(lambda: browser.find_elements("id", "open-pair-0"), 60, "the run's pairs")
     rows = browser.find_elements("css selector", "#run-pairs tbody tr")
     assert len(rows) == 4 and "failed" in rows[2].text
     browser.find_element("id", "open-pair-0").click()
-    until(lambda: browser.find_element("id", "match-count").text == f"{MANY} matches", 20, "the run's pair")
+    until(lambda: browser.find_element("id", "match-count").text == f"{MANY} matches", 60, "the run's pair")
     settle(browser)
     frames = browser.execute_script("return slimeWeb.measureFrames(40);")
     print(f"{MANY} matches: frame time mean {frames['mean']:.1f} ms, median {frames['median']:.1f} ms, "
@@ -220,7 +220,7 @@ def test_twenty_thousand_matches_zoom_and_pan_smoothly(browser, server, shots):
     x, y = browser.execute_script("return slimeWeb.S.matches.keypoints0[0];")
     browser.execute_script("slimeWeb.view.fit(0); slimeWeb.view.draw();")
     pointer(browser, 0, x, y)
-    until(lambda: "match(es)" in browser.find_element("id", "info").text, 5, "the clicked match")
+    until(lambda: "match(es)" in browser.find_element("id", "info").text, 60, "the clicked match")
     settle(browser)
     browser.save_screenshot(str(shots / "many-matches.png"))
 
@@ -238,11 +238,11 @@ def test_annotate_a_planar_pair_and_save_it_for_the_bench(browser, server, shots
         x0, y0 = browser.execute_script("const p = slimeWeb.S.annot.pending; return [p.x, p.y];")
         mapped = PLANAR_H @ [x0, y0, 1.0]
         pointer(browser, 1, mapped[0] / mapped[2], mapped[1] / mapped[2])
-        until(lambda k=k: browser.execute_script(f"return slimeWeb.S.annot.pairs.length === {k + 1};"), 5,
+        until(lambda k=k: browser.execute_script(f"return slimeWeb.S.annot.pairs.length === {k + 1};"), 60,
               f"pair {k + 1}")
     settle(browser)
     assert len(browser.find_elements("css selector", "#ann-pairs tbody tr")) == 8
-    until(lambda: "F: fitted" in browser.find_element("id", "ann-status").text, 10, "the fit")
+    until(lambda: "F: fitted" in browser.find_element("id", "ann-status").text, 60, "the fit")
 
     # the cursor over a new point of image 0: its H reprojection and its epipolar line in image 1
     probe = np.array([230.0, 110.0])
@@ -263,7 +263,7 @@ def test_annotate_a_planar_pair_and_save_it_for_the_bench(browser, server, shots
     name.clear()
     name.send_keys("astro")
     browser.find_element("id", "ann-save").click()
-    until(lambda: "saved (wxbs)" in browser.find_element("id", "ann-status").text, 10, "the WxBS save")
+    until(lambda: "saved (wxbs)" in browser.find_element("id", "ann-status").text, 60, "the WxBS save")
     [pair] = read_wxbs(annotations / "wxbs")
     corrs = pair.corrs
     mapped = np.c_[corrs[:, :2], np.ones(len(corrs))] @ PLANAR_H.T
@@ -271,7 +271,7 @@ def test_annotate_a_planar_pair_and_save_it_for_the_bench(browser, server, shots
     assert corrs.shape == (8, 4) and errors.max() < 1.5, errors
     browser.find_element("id", "model-H").click()
     browser.find_element("id", "ann-save").click()
-    until(lambda: "saved (planar)" in browser.find_element("id", "ann-status").text, 10, "the planar save")
+    until(lambda: "saved (planar)" in browser.find_element("id", "ann-status").text, 60, "the planar save")
     [planar] = read_planar(annotations / "planar")
     corners = np.array([[0, 0, 1], [399, 0, 1], [0, 299, 1], [399, 299, 1]], float)
     ours, true = corners @ planar.H.T, corners @ PLANAR_H.T
