@@ -46,6 +46,7 @@ def match_views(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, 
     if config.mode == "off":
         return xy0, xy1, scores, record
     parts = [(xy0, xy1, scores)]
+    keypoints1 = features1.xy.detach().cpu().numpy().astype(np.float64)  # image 1's, once for every view
 
     def enough() -> str:
         support = consistent_matches(*(np.concatenate([p[k] for p in parts]) for k in (0, 1)), seed)
@@ -62,7 +63,7 @@ def match_views(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, 
             matches = pipeline.match(features0, features1, view_image.shape[:2], image1.shape[:2])
             found0 = view.frame.to_original(features0.xy.detach().cpu().numpy().astype(np.float64)[matches.idx0])
             inside = view.inside(found0)
-            found1 = features1.xy.detach().cpu().numpy().astype(np.float64)[matches.idx1]
+            found1 = keypoints1[matches.idx1]
             parts.append((found0[inside], found1[inside], np.asarray(matches.scores)[inside]))
             record.views += 1
         record.tilts.append(tilt)
