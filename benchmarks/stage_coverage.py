@@ -125,7 +125,7 @@ def dtm_variant_matches(stages: dict[str, np.ndarray], sizes, dtm: DTMConfig, sp
                         ) -> tuple[np.ndarray, np.ndarray]:
     """The global DTM rerun on a result's input (``stages["dtm_input_*"]``) with the variant ``spec``."""
     options, radius = parse_dtm_variant(spec)
-    xy0, xy1, _ = global_dtm(stages["dtm_input_xy0"], stages["dtm_input_xy1"], stages["dtm_input_score"], *sizes,
+    xy0, xy1, _, _ = global_dtm(stages["dtm_input_xy0"], stages["dtm_input_xy1"], stages["dtm_input_score"], *sizes,
                              replace(dtm, **options), radius)
     return xy0, xy1
 

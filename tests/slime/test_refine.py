@@ -91,7 +91,7 @@ def test_global_dtm_merges_exact_duplicates():
     x1 = x0 + [10.0, 5.0]
     xy0, xy1 = np.vstack([x0, x0[:100]]), np.vstack([x1, x1[:100]])
     scores = rng.uniform(0, 1, 400)
-    k0, k1, s = global_dtm(xy0, xy1, scores, (220, 220), (220, 220))
+    k0, k1, s, _ = global_dtm(xy0, xy1, scores, (220, 220), (220, 220))
     rows = np.hstack([k0, k1])
     assert len(np.unique(rows, axis=0)) == len(rows) and len(rows) > 250
     assert np.all(np.diff(s) >= 0)
@@ -110,7 +110,7 @@ def test_cluster_representatives_and_shared_verdicts():
     x0 = rng.uniform(5, 195, (200, 2))
     x1 = x0 + [10.0, 5.0]
     near0, near1 = x0[:80] + rng.uniform(-0.4, 0.4, (80, 2)), x1[:80] + rng.uniform(-0.4, 0.4, (80, 2))
-    k0, k1, _ = global_dtm(np.vstack([x0, near0]), np.vstack([x1, near1]), rng.uniform(0, 1, 280), (220, 220),
+    k0, k1, _, _ = global_dtm(np.vstack([x0, near0]), np.vstack([x1, near1]), rng.uniform(0, 1, 280), (220, 220),
                            (220, 220))
     kept = {tuple(r) for r in np.round(np.hstack([k0, k1]), 6)}
     both = np.round(np.hstack([np.vstack([x0, near0]), np.vstack([x1, near1])]), 6)
@@ -184,7 +184,7 @@ def test_final_matches_with_tiles_and_dtm_are_the_global_dtm():
     tiles = TileMatches(x0[:120] + 0.25, x1[:120] + 0.25, rng.uniform(0, 1, 120))
     config = DTMConfig()
     final = final_matches(x0[120:], x1[120:], scores[120:], tiles, (220, 220), (220, 220), True, config)
-    k0, k1, s = global_dtm(np.vstack([x0[120:], tiles.xy0]), np.vstack([x1[120:], tiles.xy1]),
+    k0, k1, s, _ = global_dtm(np.vstack([x0[120:], tiles.xy0]), np.vstack([x1[120:], tiles.xy1]),
                            np.concatenate([scores[120:], tiles.scores]), (220, 220), (220, 220), config)
     assert 200 < len(s) < 420
     for got, want in ((final.xy0, k0), (final.xy1, k1), (final.scores, s)):

@@ -26,11 +26,13 @@ from .._runtime.options import check_choice, check_integer
 from .._runtime.timing import StageTimer
 from ..geometry.frames import Frame, homographies_to_original
 from ..geometry.ransac import HomographyRansacConfig
+from ..errors import ConfigError
 from ..pipelines import BasePipeline
 from ..views import ViewConfig, ViewRecord
 from .block_planes import BlockPlanes, block_planes
 from .blocks import Block, BlockConfig, make_blocks, make_tiles
 from .diagnostics import empty_result_reason, layout_warning, tile_count_warning
+from .dtm_frame import DTM_MAX_TILT
 from .expansion import Expansion, PlaneConfig, expand_planes
 from .level_cache import LevelCache, feature_levels
 from .levels import DETECTIONS, LevelRequest
@@ -63,6 +65,10 @@ class SlimeConfig:
         global_dtm: the final DTM on the union of F^theta and tile matches (Sec. 3.8); None: the base
             pipeline's ``slime_global_dtm`` (the paper's Slimed Key.Net runs none). Exact duplicates are merged
             either way.
+        dtm_max_tilt: the global DTM compares image 0's matches in image 1's frame (through the matches'
+            robust affine map) when that map stretches one direction more than this many times the other
+            (ours, :mod:`.dtm_frame`: Delaunay neighbourhoods do not survive an extreme viewpoint's tilt);
+            inf: always the images' own frames (the paper's).
         keep_stages: keep every stage's sets in the result (for ``slime viz`` / ``--save-stages``).
         detection: how blocks get their keypoints (``levels.DETECTIONS``): "scale" detects and
             describes each block scale once on the whole scaled image, each block owning its core's keypoints
@@ -87,6 +93,7 @@ class SlimeConfig:
     workers: int | None = None
     refine_tiles: bool = True
     global_dtm: bool | None = None
+    dtm_max_tilt: float = DTM_MAX_TILT
     keep_stages: bool = False
     detection: str | None = None
     tile_detection: str = "scale"
@@ -100,6 +107,8 @@ class SlimeConfig:
         check_integer("workers", self.workers, 1, optional=True)
         check_integer("bins", self.bins, 1)
         check_integer("min_plane_matches", self.min_plane_matches, 4)
+        if not self.dtm_max_tilt >= 1:
+            raise ConfigError(f"dtm_max_tilt must be >= 1 (inf: never), got {self.dtm_max_tilt}")
         if self.detection is not None:
             check_choice("detection", self.detection, DETECTIONS)
         check_choice("tile_detection", self.tile_detection, DETECTIONS)
@@ -235,7 +244,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     with timer("global_dtm"):
         run_dtm = pipeline.slime_global_dtm if config.global_dtm is None else config.global_dtm
         final = final_matches(table.xy0[in_ftheta], table.xy1[in_ftheta], table.score[in_ftheta], tiles, size0,
-                              size1, run_dtm, getattr(getattr(pipeline, "config", None), "dtm", None))
+                              size1, run_dtm, getattr(getattr(pipeline, "config", None), "dtm", None),
+                              config.dtm_max_tilt)
     results = (features, planes, expansion, selection, tiles or TileMatches.empty(), final)
     counts = {name: value for result in results for name, value in result.counts.items()}
     if not len(final.xy0):
@@ -245,6 +255,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         stages = {name: array for result in (layout, *results[1:]) for name, array in result.arrays().items()}
     counts["views"] = record.views
     decisions = {"vote": selection.vote, "vote_reason": selection.vote_reason, "views": record.as_dict()}
+    if final.dtm_frame:
+        decisions["global_dtm"] = final.dtm_frame
     return SlimeOutput(final.xy0, final.xy1, final.scores, counts, stages, warnings, decisions)
 
 

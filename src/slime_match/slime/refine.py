@@ -17,6 +17,7 @@ from ..matching.dtm import DTMConfig, dtm_filter
 from ..pipelines import BasePipeline
 from .blocks import Block
 from .clusters import greedy_clusters
+from .dtm_frame import DTM_MAX_TILT, DTMFrame, dtm_frame
 from .fixed_descriptors import FixedDescriptors
 from .jobs import MatchJob, match_jobs
 from .levels import ScaleLevel
@@ -119,7 +120,8 @@ class TileMatches:
 @dataclass
 class FinalMatches:
     """Slime's output matches (K, 2), (K, 2), (K,) in original px sorted by score, and the last step's input:
-    F^theta's matches then the tile matches (the global DTM's input where it runs)."""
+    F^theta's matches then the tile matches (the global DTM's input where it runs), and the frame the global
+    DTM compared them in ("" where it did not run)."""
 
     xy0: np.ndarray
     xy1: np.ndarray
@@ -127,6 +129,7 @@ class FinalMatches:
     input_xy0: np.ndarray
     input_xy1: np.ndarray
     input_scores: np.ndarray
+    dtm_frame: str = ""
 
     @property
     def counts(self) -> dict[str, int]:
@@ -227,8 +230,8 @@ def cluster_representatives(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray
 
 
 def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size1,
-               config: DTMConfig | None = None, cluster_radius: float = CLUSTER_RADIUS
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               config: DTMConfig | None = None, cluster_radius: float = CLUSTER_RADIUS,
+               max_tilt: float = DTM_MAX_TILT) -> tuple[np.ndarray, np.ndarray, np.ndarray, DTMFrame]:
     """Final DTM on the union of tile and F^theta matches.
 
     Exact duplicate matches are merged first. Overlapping blocks and tiles leave clusters of matches a few
@@ -241,38 +244,44 @@ def global_dtm(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, size0, size
     from block levels and tiles, so no keypoint set is "the others" of them, and carving with the tile
     keypoints removes correct matches on strongly rotated pairs.
 
+    Under a strong tilt the representatives of image 0 are compared in image 1's frame (:mod:`.dtm_frame`).
+
     Args:
         xy0, xy1: (K, 2) match ends in px; scores: (K,) lower is better; size0, size1: (H, W) image sizes.
         config: the DTM's parameters (the base pipeline's); cluster_radius: px, see ``cluster_representatives``.
+        max_tilt: see :func:`~.dtm_frame.dtm_frame` (inf: always the images' own frames, the paper's DTM).
 
     Returns:
-        xy0, xy1 (K, 2) and scores (K,) of the kept matches, sorted by score.
+        xy0, xy1 (K, 2) and scores (K,) of the kept matches, sorted by score, and the frame DTM ran in.
     """
     if len(xy0) == 0:
-        return xy0, xy1, scores
+        return xy0, xy1, scores, dtm_frame(xy0, xy1, size0, size1, max_tilt)
     xy0, xy1, scores = merge_duplicates(xy0, xy1, scores)
     rep, cluster = cluster_representatives(xy0, xy1, scores, cluster_radius)
-    keep = dtm_filter(xy0[rep], xy1[rep], scores[rep], size0, size1, config=config).keep[cluster]
+    frame = dtm_frame(xy0[rep], xy1[rep], size0, size1, max_tilt)
+    keep = dtm_filter(frame.map(xy0[rep]), xy1[rep], scores[rep], frame.size, size1, config=config).keep[cluster]
     order = np.argsort(scores[keep], kind="stable")
-    return xy0[keep][order], xy1[keep][order], scores[keep][order]
+    return xy0[keep][order], xy1[keep][order], scores[keep][order], frame
 
 
 def final_matches(xy0: np.ndarray, xy1: np.ndarray, scores: np.ndarray, tiles: TileMatches | None, size0, size1,
-                  run_dtm: bool, dtm: DTMConfig | None = None) -> FinalMatches:
+                  run_dtm: bool, dtm: DTMConfig | None = None, max_tilt: float = DTM_MAX_TILT) -> FinalMatches:
     """The matches of F^theta (K, 2), (K, 2), (K,) and the tile matches (None: Sec. 3.8 did not run) as
     Slime's output: with tiles, exact duplicates merged, then the global DTM when ``run_dtm``; sorted by score.
 
     Args:
         size0, size1: (H, W) of the images; dtm: the global DTM's parameters (the base pipeline's; None: the
-            defaults).
+            defaults); max_tilt: see :func:`global_dtm`.
     """
     found = tiles or TileMatches.empty()
     all0, all1 = np.vstack([xy0, found.xy0]), np.vstack([xy1, found.xy1])
     all_scores = np.concatenate([scores, found.scores])
+    frame = ""
     if tiles is not None and run_dtm:
-        out0, out1, out_scores = global_dtm(all0, all1, all_scores, size0, size1, dtm)
+        out0, out1, out_scores, dtm_in = global_dtm(all0, all1, all_scores, size0, size1, dtm, max_tilt=max_tilt)
+        frame = dtm_in.reason
     else:
         merged = merge_duplicates(all0, all1, all_scores) if tiles is not None else (all0, all1, all_scores)
         order = np.argsort(merged[2], kind="stable")
         out0, out1, out_scores = (column[order] for column in merged)
-    return FinalMatches(out0, out1, out_scores, all0, all1, all_scores)
+    return FinalMatches(out0, out1, out_scores, all0, all1, all_scores, frame)

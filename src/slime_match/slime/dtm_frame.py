@@ -1,0 +1,84 @@
+"""The frame in which the global DTM compares the two images' neighbourhoods (ours, Sec. 3.8).
+
+DTM compares Delaunay neighbourhoods, which a similarity keeps but a strong affine stretch does not: under
+the tilt of an extreme viewpoint (one image foreshortened several times more in one direction than in the
+other) the triangulations of the correct matches disagree between the images and DTM keeps a small wrong
+cluster instead. When the matches' robust global affine map stretches one direction more than ``max_tilt``
+times the other, image 0's points are mapped by it into image 1's frame before DTM, so both triangulations
+are built on similarly shaped point sets; below that, the images' own frames are kept (the paper's DTM).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..matching.delaunay import MAX_SIDE
+
+__all__ = ["DTMFrame", "dtm_frame", "DTM_MAX_TILT"]
+
+DTM_MAX_TILT = 2.0  # above this tilt of the matches' affine map, image 0 is compared in image 1's frame
+AFFINE_TOLERANCE = 0.02  # RANSAC inlier distance of the global affine fit, as a fraction of image 1's diagonal
+DEGENERATE_TILT = 64.0  # a fit stretched beyond this, or on matches this elongated in image 0, is degenerate
+
+
+@dataclass
+class DTMFrame:
+    """Where DTM compares the matches: image 0's points through ``affine`` in a frame of ``size``.
+
+    Attributes:
+        affine: (2, 3) map of image 0's px into the compared frame; None: image 0's own frame.
+        size: (H, W) of that frame in px.
+        tilt: the matches' affine map's larger over smaller singular value (nan without a fit).
+        reason: the choice and why, in words.
+    """
+
+    affine: np.ndarray | None
+    size: tuple[int, int]
+    tilt: float
+    reason: str
+
+    def map(self, xy0: np.ndarray) -> np.ndarray:
+        """(K, 2) image-0 px in the compared frame."""
+        return xy0 if self.affine is None else xy0 @ self.affine[:, :2].T + self.affine[:, 2]
+
+
+def dtm_frame(xy0: np.ndarray, xy1: np.ndarray, size0: tuple[int, int], size1: tuple[int, int],
+              max_tilt: float = DTM_MAX_TILT) -> DTMFrame:
+    """The frame for DTM on the (K, 2), (K, 2) matches of images of (H, W) ``size0`` and ``size1``.
+
+    The affine map is OpenCV's RANSAC fit (deterministic) with inliers within ``AFFINE_TOLERANCE`` of image
+    1's diagonal: a global affine map only approximates the scene, it only has to undo the stretch.
+    """
+    own = tuple(int(s) for s in size0)
+    if not np.isfinite(max_tilt) or len(xy0) < 3:
+        return DTMFrame(None, own, float("nan"), "image 0's own frame")
+    tolerance = AFFINE_TOLERANCE * float(np.hypot(*size1))
+    xy0 = np.asarray(xy0, np.float64)
+    affine, inliers = cv2.estimateAffine2D(xy0, np.asarray(xy1, np.float64), method=cv2.RANSAC,
+                                           ransacReprojThreshold=tolerance, maxIters=2000, confidence=0.999)
+    if affine is None:
+        return DTMFrame(None, own, float("nan"), "image 0's own frame: no affine map fits the matches")
+    singular = np.linalg.svd(affine[:, :2], compute_uv=False)
+    tilt = float(singular[0] / singular[1]) if singular[1] > 0 else float("inf")
+    if tilt <= max_tilt:
+        return DTMFrame(None, own, tilt, f"image 0's own frame: the matches' affine map has tilt {tilt:.1f} "
+                                         f"<= {max_tilt:g}")
+    support = xy0[inliers.ravel() > 0]
+    spread = np.linalg.svd(support - support.mean(0), compute_uv=False)
+    if tilt > DEGENERATE_TILT or spread[1] * DEGENERATE_TILT < spread[0]:  # nearly on a line: any stretch fits
+        return DTMFrame(None, own, tilt, f"image 0's own frame: the matches' affine map is degenerate (tilt "
+                                         f"{tilt:.1f})")
+    height, width = own
+    corners = np.array([[0, 0], [width - 1, 0], [0, height - 1], [width - 1, height - 1]], np.float64)
+    corners = corners @ affine[:, :2].T + affine[:, 2]
+    low = corners.min(0)
+    extent = np.ceil(corners.max(0) - low).astype(int) + 1
+    if extent.max() + 1 > MAX_SIDE:
+        return DTMFrame(None, own, tilt, f"image 0's own frame: image 1's frame would span {extent.max()} px")
+    shifted = affine.copy()
+    shifted[:, 2] -= low
+    return DTMFrame(shifted, (int(extent[1]), int(extent[0])), tilt,
+                    f"image 1's frame: the matches' affine map has tilt {tilt:.1f} > {max_tilt:g}")
