@@ -163,4 +163,4 @@ def test_more_cpus_per_actor_than_a_node_has_is_refused(cluster, images, tmp_pat
     jobs = read_pairs(_pairs_file(tmp_path, "left.png right.png\nright.png left.png\n"), images)
     with pytest.raises(ConfigError, match="more than any node"):
         match_pairs(make_config("rootsift"), jobs, tmp_path / "run", backend="ray", cpus_per_worker=2)
-    assert not (tmp_path / "run" / "records").exists()
+    assert not (tmp_path / "run").exists()

@@ -19,9 +19,11 @@ import os
 import signal
 import sys
 from collections.abc import Iterator
+from contextlib import contextmanager
 from multiprocessing.connection import Connection, wait
 from multiprocessing.context import SpawnProcess
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 from tqdm import tqdm
@@ -42,7 +44,7 @@ from .pair_tasks import (
     pair_record,
     set_threads,
 )
-from .ray_backend import import_ray, match_on_ray
+from .ray_backend import check_node_cpus, connected, match_on_ray
 from .schedule import PairScheduler, RecentImages
 from .shards import check_shard, shard_positions
 
@@ -146,43 +148,55 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
         raise ConfigError(f"unknown backend {backend!r}: expected one of {', '.join(BATCH_BACKENDS)}")
     if shard is not None:
         check_shard(shard)
-    if backend == "ray":
-        import_ray()  # a missing Ray fails before any work
     out = Path(output)
-    # resolves "auto" choices and fails early on missing weights or a missing GPU (and a bad cache budget)
-    matcher = Matcher(config, feature_cache_mb=feature_cache_mb)
-    claim_run_folder(out, matcher.config, overwrite)
-    selected = range(len(jobs)) if shard is None else shard_positions([job_images(j) for j in jobs], *shard)
-    records: dict[int, dict[str, Any]] = {}
-    todo = []
-    for index in selected:
-        if not overwrite and is_complete(out / jobs[index].folder):
-            records[index] = pair_record(jobs[index], "skipped", **finished_counts(out / jobs[index].folder))
+    # a missing Ray, no cluster or no node of cpus_per_worker CPUs fail before the run folder is touched
+    with _cluster(backend, ray_address, cpus_per_worker or 1) as ray:
+        # resolves "auto" choices and fails early on missing weights or a missing GPU (and a bad cache budget)
+        matcher = Matcher(config, feature_cache_mb=feature_cache_mb)
+        claim_run_folder(out, matcher.config, overwrite)
+        selected = range(len(jobs)) if shard is None else shard_positions([job_images(j) for j in jobs], *shard)
+        records: dict[int, dict[str, Any]] = {}
+        todo = []
+        for index in selected:
+            if not overwrite and is_complete(out / jobs[index].folder):
+                records[index] = pair_record(jobs[index], "skipped", **finished_counts(out / jobs[index].folder))
+            else:
+                todo.append(index)
+        bar = tqdm(total=len(selected), initial=len(records), desc="pairs", unit="pair", file=sys.stderr,
+                   disable=None if progress else True)  # None: a bar only when stderr is a terminal
+        if ray is not None and todo:
+            finished = match_on_ray(ray, matcher.config, jobs, todo, out, plot, workers, cpus_per_worker or 1,
+                                    feature_cache_mb)
+        elif (workers or 1) == 1 or len(todo) <= 1:
+            finished = _match_in_process(matcher, jobs, todo, out, plot)
         else:
-            todo.append(index)
-    bar = tqdm(total=len(selected), initial=len(records), desc="pairs", unit="pair", file=sys.stderr,
-               disable=None if progress else True)  # None: a bar only when stderr is a terminal
-    if backend == "ray" and todo:
-        finished = match_on_ray(matcher.config, jobs, todo, out, plot, ray_address, workers, cpus_per_worker or 1,
-                                feature_cache_mb)
-    elif (workers or 1) == 1 or len(todo) <= 1:
-        finished = _match_in_process(matcher, jobs, todo, out, plot)
-    else:
-        finished = _match_in_workers(matcher, jobs, todo, out, plot, workers, cpus_per_worker,
-                                     feature_cache_mb / workers)
-    try:
-        for index, record in finished:
-            write_record(out, record)
-            records[index] = record
-            if record["status"] == "failed":
-                logger.warning("%s %s: %s", record["image0"], record["image1"], record["error"])
-            bar.set_postfix_str(f"{record['image0']} {record['image1']}: {record['matches'] or 0} matches")
-            bar.update()
-    finally:
-        finished.close()  # stops the workers when the loop ends early
-        bar.close()
-        write_index(out, jobs)
-    return [records[i] for i in sorted(records)]
+            finished = _match_in_workers(matcher, jobs, todo, out, plot, workers, cpus_per_worker,
+                                         feature_cache_mb / workers)
+        try:
+            for index, record in finished:
+                write_record(out, record)
+                records[index] = record
+                if record["status"] == "failed":
+                    logger.warning("%s %s: %s", record["image0"], record["image1"], record["error"])
+                bar.set_postfix_str(f"{record['image0']} {record['image1']}: {record['matches'] or 0} matches")
+                bar.update()
+        finally:
+            finished.close()  # stops the workers when the loop ends early
+            bar.close()
+            write_index(out, jobs)
+        return [records[i] for i in sorted(records)]
+
+
+@contextmanager
+def _cluster(backend: str, address: str, threads: int) -> Iterator[ModuleType | None]:
+    """Within the block, the ``ray`` module connected to the cluster at ``address`` that has a node of
+    ``threads`` CPUs, for the "ray" backend (None for "local")."""
+    if backend != "ray":
+        yield None
+        return
+    with connected(address) as ray:
+        check_node_cpus(ray, threads)
+        yield ray
 
 
 def reindex(jobs: list[PairJob], output: str | os.PathLike) -> dict[str, Any]:

@@ -24,6 +24,7 @@ from .pair_tasks import PairJob, finished_counts, pair_record
 INDEX_FILE = "pairs.json"
 RUN_FILE = "run.json"
 RECORDS_FOLDER = "records"
+REBUILDS = 10  # at most, by one call of write_index
 
 
 def claim_run_folder(out: Path, config: MatchConfig, overwrite: bool) -> None:
@@ -91,16 +92,19 @@ def write_index(out: Path, jobs: list[PairJob]) -> dict[str, Any]:
 
     The index lists, in ``jobs`` order, the record of every pair that has one, else (a pair folder finished
     but its record not written) a "done" record made from the folder's summary.json; ``finished`` says
-    whether every pair is listed. The index is written again until no record changed while it was built, so
-    that the last of several processes finishing at once lists all their records.
+    whether every pair is listed. The index is written again while records change during its writing (at
+    most ``REBUILDS`` times: a process still writing records rebuilds the index after its last one), so that
+    the last of several processes finishing at once lists all their records.
     """
+    read: dict[str, tuple[tuple[int, int, int], dict[str, Any]]] = {}  # file -> its state and record
     state = _records_state(out)
-    while True:
-        index = _index(out, jobs, state)
+    for _ in range(REBUILDS):
+        index = _index(out, jobs, state, read)
         save_json(out / INDEX_FILE, index)
         state, before = _records_state(out), state
         if state == before:
-            return index
+            break
+    return index
 
 
 def _records_state(out: Path) -> dict[str, tuple[int, int, int]]:
@@ -120,12 +124,17 @@ def _records_state(out: Path) -> dict[str, tuple[int, int, int]]:
     return state
 
 
-def _index(out: Path, jobs: list[PairJob], state: dict[str, Any]) -> dict[str, Any]:
+def _index(out: Path, jobs: list[PairJob], state: dict[str, tuple[int, int, int]],
+           read: dict[str, tuple[tuple[int, int, int], dict[str, Any]]]) -> dict[str, Any]:
+    """The index of ``jobs`` from the record files in ``state``; ``read`` keeps the records read, by file, for
+    the next call (a file of the same state is not read again)."""
     records = []
     for job in jobs:
-        record = None
-        if f"{job.folder}.json" in state:
-            record = json.loads((out / RECORDS_FOLDER / f"{job.folder}.json").read_text())
+        name, record = f"{job.folder}.json", None
+        if name in state:
+            if name not in read or read[name][0] != state[name]:
+                read[name] = state[name], json.loads((out / RECORDS_FOLDER / name).read_text())
+            record = read[name][1]
             if (record.get("image0"), record.get("image1")) != (job.name0, job.name1):
                 record = None  # a record of another pairs file's images with the same folder name
         if record is None and is_complete(out / job.folder):

@@ -92,8 +92,16 @@ class PairActor:
         return record, self._recent.held(cached_images(self._matcher))
 
 
-def match_on_ray(config: MatchConfig, jobs: list[PairJob], todo: list[int], out: Path, plot: bool,
-                 address: str, actors: int | None, threads: int, feature_cache_mb: float
+def check_node_cpus(ray: ModuleType, threads: int) -> None:
+    """Raise ConfigError unless a node of the connected cluster has ``threads`` CPUs (an actor's)."""
+    largest = max((node["Resources"].get("CPU", 0) for node in ray.nodes() if node["Alive"]), default=0)
+    if threads > largest:
+        raise ConfigError(f"each Ray actor asks for {threads} CPUs (--cpus-per-worker), more than any node of "
+                          f"the cluster has (at most {largest:g})")
+
+
+def match_on_ray(ray: ModuleType, config: MatchConfig, jobs: list[PairJob], todo: list[int], out: Path,
+                 plot: bool, actors: int | None, threads: int, feature_cache_mb: float
                  ) -> Iterator[tuple[int, dict[str, Any]]]:
     """(index, record) of the ``todo`` pairs as Ray actors finish them.
 
@@ -104,85 +112,79 @@ def match_on_ray(config: MatchConfig, jobs: list[PairJob], todo: list[int], out:
     actor dies twice is recorded as failed. Closing the iterator kills the actors.
 
     Args:
+        ray: the ``ray`` module, connected (:func:`connected`).
         config: the matcher configuration.
         jobs, todo: the pairs, and the positions in ``jobs`` of those to match.
         out: the run folder.
         plot: also draw each pair's matches.png.
-        address: the cluster (see :func:`connected`).
         actors: how many actors; None: as many as the cluster's CPUs hold.
         threads: CPUs per actor.
         feature_cache_mb: each actor's feature cache (MiB).
 
     Raises:
-        ConfigError: Ray missing, no cluster, or ``threads`` above every node's CPUs.
         SlimeMatchError: no actor could start (their error named).
     """
     config = copy.deepcopy(config)
     if config.slime.workers is None:
         config.slime.workers = threads
-    with connected(address) as ray:
-        largest = max((node["Resources"].get("CPU", 0) for node in ray.nodes() if node["Alive"]), default=0)
-        if threads > largest:
-            raise ConfigError(f"each Ray actor asks for {threads} CPUs (--cpus-per-worker), more than any node "
-                              f"of the cluster has (at most {largest:g})")
-        if actors is None:
-            actors = max(1, int(ray.cluster_resources().get("CPU", 0) // threads))
-        remote = ray.remote(PairActor).options(num_cpus=threads, max_restarts=0)
-        scheduler = PairScheduler([job_images(jobs[index]) for index in todo])
-        retry: list[int] = []  # todo positions whose actor died once
-        died: set[int] = set()
-        starting: dict[Any, Any] = {}  # ready() reference -> actor
-        busy: dict[Any, tuple[Any, int]] = {}  # match() reference -> actor, todo position
+    if actors is None:
+        actors = max(1, int(ray.cluster_resources().get("CPU", 0) // threads))
+    remote = ray.remote(PairActor).options(num_cpus=threads, max_restarts=0)
+    scheduler = PairScheduler([job_images(jobs[index]) for index in todo])
+    retry: list[int] = []  # todo positions whose actor died once
+    died: set[int] = set()
+    starting: dict[Any, Any] = {}  # ready() reference -> actor
+    busy: dict[Any, tuple[Any, int]] = {}  # match() reference -> actor, todo position
 
-        def start() -> None:
-            actor = remote.remote(config, threads, feature_cache_mb, out, plot)
-            starting[actor.ready.remote()] = actor
+    def start() -> None:
+        actor = remote.remote(config, threads, feature_cache_mb, out, plot)
+        starting[actor.ready.remote()] = actor
 
-        def give(actor: Any, cached: list[str]) -> None:
-            position = retry.pop(0) if retry else scheduler.next(cached)
-            if position is None:
-                ray.kill(actor)
-            else:
-                busy[actor.match.remote(jobs[todo[position]])] = (actor, position)
+    def give(actor: Any, cached: list[str]) -> None:
+        position = retry.pop(0) if retry else scheduler.next(cached)
+        if position is None:
+            ray.kill(actor)
+        else:
+            busy[actor.match.remote(jobs[todo[position]])] = (actor, position)
 
-        try:
-            for _ in range(min(actors, len(todo))):
-                start()
-            while busy or (starting and (retry or len(scheduler))):
-                (reference,), _ = ray.wait([*busy, *starting], num_returns=1)
-                if reference in starting:
-                    actor = starting.pop(reference)
-                    try:
-                        ray.get(reference)
-                    except ray.exceptions.RayError as error:
-                        logger.warning("a Ray actor could not start: %s", _first_line(error))
-                        if not busy and not starting:
-                            raise SlimeMatchError(f"no Ray actor could start: {_first_line(error)}") from None
-                    else:
-                        give(actor, [])
-                    continue
-                actor, position = busy.pop(reference)
+    try:
+        for _ in range(min(actors, len(todo))):
+            start()
+        while busy or (starting and (retry or len(scheduler))):
+            (reference,), _ = ray.wait([*busy, *starting], num_returns=1)
+            if reference in starting:
+                actor = starting.pop(reference)
                 try:
-                    record, cached = ray.get(reference)
-                except ray.exceptions.RayError as error:  # the actor died in this pair
-                    ray.kill(actor)
-                    job = jobs[todo[position]]
-                    if position in died:
-                        yield todo[position], pair_record(job, "failed", error="its Ray actor died twice "
-                                                          f"(out of memory?): {_first_line(error)}")
-                    else:
-                        died.add(position)
-                        retry.append(position)
-                        logger.warning("%s %s: its Ray actor died (%s); the pair goes to another actor",
-                                       job.name0, job.name1, _first_line(error))
-                    if retry or len(scheduler):
-                        start()
-                    continue
-                give(actor, cached)
-                yield todo[position], record
-        finally:
-            for actor in [*starting.values(), *(actor for actor, _ in busy.values())]:
+                    ray.get(reference)
+                except ray.exceptions.RayError as error:
+                    logger.warning("a Ray actor could not start: %s", _first_line(error))
+                    if not busy and not starting:
+                        raise SlimeMatchError(f"no Ray actor could start: {_first_line(error)}") from None
+                else:
+                    give(actor, [])
+                continue
+            actor, position = busy.pop(reference)
+            try:
+                record, cached = ray.get(reference)
+            except ray.exceptions.RayError as error:  # the actor died in this pair
                 ray.kill(actor)
+                job = jobs[todo[position]]
+                if position in died:
+                    yield todo[position], pair_record(job, "failed", error="its Ray actor died twice "
+                                                      f"(out of memory?): {_first_line(error)}")
+                else:
+                    died.add(position)
+                    retry.append(position)
+                    logger.warning("%s %s: its Ray actor died (%s); the pair goes to another actor",
+                                   job.name0, job.name1, _first_line(error))
+                if retry or len(scheduler):
+                    start()
+                continue
+            give(actor, cached)
+            yield todo[position], record
+    finally:
+        for actor in [*starting.values(), *(actor for actor, _ in busy.values())]:
+            ray.kill(actor)
 
 
 def _first_line(error: BaseException) -> str:
