@@ -2,7 +2,10 @@
 (every pair), weight-free Slime, local ``--workers 2`` against two Ray actors on a local cluster of two 1-CPU
 nodes (on the loopback address), the matches compared pair by pair.
 
-    python benchmarks/bench_ray.py --data DATA [--workers 2] [--out results/bench_ray.json]
+    python benchmarks/bench_ray.py --data DATA [--workers 2] [--method rootsift] [--out results/bench_ray.json]
+
+``--method`` runs another preset instead (the base RootSIFT alone: a shorter run, in which the per-pair
+overhead weighs more).
 
 ``DATA`` holds ``sacre_coeur``. Each run is timed from the call of ``match_pairs`` to its return (the workers'
 or actors' start, model loading and the compiled loops' cache included; the Ray nodes are started before).
@@ -35,11 +38,10 @@ from slime_match.runs.pair_lists import make_pairs, write_pairs
 WEIGHT_FREE = {"shape": "baumberg", "orientation": "gradient", "descriptor": "rootsift"}
 
 
-def _run(label: str, out: Path, workers: int, **options) -> dict:
-    """One timed match_pairs run of the module's configuration into ``out``."""
+def _run(label: str, config, out: Path, workers: int, **options) -> dict:
+    """One timed match_pairs run of ``config`` into ``out``."""
     start = time.perf_counter()
-    records = match_pairs(make_config("slime", **WEIGHT_FREE), options.pop("jobs"), out, workers=workers,
-                          progress=False, **options)
+    records = match_pairs(config, options.pop("jobs"), out, workers=workers, progress=False, **options)
     wall = time.perf_counter() - start
     matcher = sum(r["seconds"] for r in records if r["status"] == "done")
     run = {"backend": label, "workers": workers, "seconds": round(wall, 2), "matcher_seconds": round(matcher, 2),
@@ -53,14 +55,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data", type=Path, required=True, help="folder with sacre_coeur")
     parser.add_argument("--workers", type=int, default=2, help="local workers, and Ray nodes of 1 CPU (default 2)")
+    parser.add_argument("--method", default="slime", help="slime (weight-free, the default) or another preset")
     parser.add_argument("--out", type=Path, default=Path("results/bench_ray.json"))
     args = parser.parse_args()
+    config = make_config("slime", **WEIGHT_FREE) if args.method == "slime" else make_config(args.method)
     images = args.data / "sacre_coeur"
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
         write_pairs(folder / "pairs.txt", make_pairs(images, "exhaustive"))
         jobs = read_pairs(folder / "pairs.txt", images)
-        local = _run("local", folder / "local", args.workers, jobs=jobs)
+        local = _run("local", config, folder / "local", args.workers, jobs=jobs)
         start = time.perf_counter()
         cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
         try:
@@ -69,7 +73,7 @@ def main() -> None:
             ray.init(address=cluster.address, logging_level="WARNING")
             cluster.wait_for_nodes()
             cluster_seconds = time.perf_counter() - start
-            remote = _run("ray", folder / "ray", args.workers, jobs=jobs, backend="ray")
+            remote = _run("ray", config, folder / "ray", args.workers, jobs=jobs, backend="ray")
         finally:
             ray.shutdown()
             cluster.shutdown()
@@ -77,7 +81,7 @@ def main() -> None:
         for job in jobs:
             a, b = (np.load(folder / run / job.folder / "matches.npz") for run in ("local", "ray"))
             identical += all(np.array_equal(a[key], b[key]) for key in a.files)
-    summary = {"pairs": len(jobs), "local": local, "ray": remote, "ray_cluster_start_s": round(cluster_seconds, 2),
+    summary = {"method": args.method, "pairs": len(jobs), "local": local, "ray": remote, "ray_cluster_start_s": round(cluster_seconds, 2),
                "ray_overhead_per_pair_s": round(remote["overhead_per_pair_s"] - local["overhead_per_pair_s"], 3),
                "identical_matches": identical, "cpus": os.cpu_count(), "load_average": os.getloadavg()}
     args.out.parent.mkdir(parents=True, exist_ok=True)
