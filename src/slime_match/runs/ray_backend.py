@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import logging
+import socket
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -52,6 +53,7 @@ def connected(address: str) -> Iterator[ModuleType]:
     if ray.is_initialized():
         yield ray
         return
+    _check_answers(address)
     try:
         ray.init(address=address, logging_level=logging.WARNING)
     except (ConnectionError, ValueError, RuntimeError) as error:
@@ -61,6 +63,19 @@ def connected(address: str) -> Iterator[ModuleType]:
         yield ray
     finally:
         ray.shutdown()
+
+
+def _check_answers(address: str, timeout: float = 10.0) -> None:
+    """Raise ConfigError when nothing accepts a connection at the ``host:port`` of ``address`` within
+    ``timeout`` seconds (Ray itself would retry for minutes); "auto" and other forms are left to Ray."""
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not host or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as error:
+        raise ConfigError(f"no Ray cluster answers at {address} ({error}): check the address of its head "
+                          "(`ray status` on the head shows it)") from None
 
 
 class PairActor:
