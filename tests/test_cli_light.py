@@ -2,6 +2,7 @@
 option's choices, `-q`, `slime warmup`, and the error of a command whose extra is missing."""
 
 import json
+import socket
 import subprocess
 import sys
 
@@ -11,7 +12,7 @@ from conftest import run_cli
 from slime_match import __version__, choices
 from slime_match.cli import build_parser
 
-HEAVY = ("torch", "numba", "cv2", "kornia", "scipy", "matplotlib", "numpy")
+HEAVY = ("torch", "numba", "cv2", "kornia", "scipy", "matplotlib", "numpy", "ray")
 WEIGHT_FREE = ["--shape", "baumberg", "--orientation", "gradient", "--descriptor", "rootsift"]
 
 
@@ -70,6 +71,26 @@ def test_demo_without_scikit_image_names_the_extra(tmp_path, capsys, monkeypatch
     monkeypatch.setitem(sys.modules, "skimage.data", None)  # what a missing package looks like to an import
     code, _, err = run_cli(capsys, "demo", "-o", tmp_path / "demo", *WEIGHT_FREE)
     assert code == 2 and "pip install 'slime-match[demo]'" in err and not (tmp_path / "demo").exists()
+
+
+def test_pairs_on_ray_without_ray_names_the_extra(pair, tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # what a missing package looks like to an import
+    pairs = tmp_path / "pairs.txt"
+    pairs.write_text(f"{pair[0]} {pair[1]}\n")
+    code, _, err = run_cli(capsys, "pairs", pairs, "-o", tmp_path / "run", "--method", "rootsift", "--ray")
+    assert code == 2 and "pip install 'slime-match[ray]'" in err and not (tmp_path / "run").exists()
+
+
+def test_pairs_on_ray_at_an_address_where_nothing_answers(pair, tmp_path, capsys):
+    pytest.importorskip("ray", reason="needs Ray, the ray extra (pip install 'slime-match[ray]')")
+    with socket.socket() as probe:  # a port that was free a moment ago
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    pairs = tmp_path / "pairs.txt"
+    pairs.write_text(f"{pair[0]} {pair[1]}\n")
+    code, _, err = run_cli(capsys, "pairs", pairs, "-o", tmp_path / "run", "--method", "rootsift", "--ray",
+                           f"127.0.0.1:{port}")
+    assert code == 2 and f"no Ray cluster answers at 127.0.0.1:{port}" in err and not (tmp_path / "run").exists()
 
 
 def test_warmup_compiles_the_loops_and_says_where_they_are_cached(capsys, monkeypatch, tmp_path):

@@ -27,6 +27,8 @@ DETECTIONS = ("scale", "block", "merged")  # how Slime's blocks get keypoints (s
 TILE_TESTS = ("plane", "flow")  # Sec. 3.8's test of tile matches; "flow" is the paper's, "plane" the default
 VIEW_MODES = ("off", "auto", "always")  # simulated views of image 0 (views.ViewConfig)
 
+BATCH_BACKENDS = ("local", "ray")  # where `slime pairs` matches its pairs (runs.batch)
+
 CAMERA_MODES = ("auto", "single", "per-folder", "per-image")  # COLMAP camera sharing (runs.colmap)
 
 # the methods of the paper's comparison, the default of ``slime bench --methods`` (eval.methods)

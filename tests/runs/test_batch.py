@@ -186,3 +186,16 @@ def test_a_dead_worker_fails_its_pair_and_is_replaced(images, tmp_path):
     assert all("worker process died (exit code -9" in r["error"] for r in records[:2])
     assert records[2]["matches"] > 100
     assert not (tmp_path / "run" / "stuck0.png__right.png").exists()
+
+
+def test_cpus_per_worker_sets_each_worker_s_share(images, tmp_path, capsys):
+    pairs = _pairs_file(tmp_path, "left.png right.png\nright.png left.png\n")
+    out = tmp_path / "run"
+    code, stdout, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST, "--workers", 2,
+                                "--cpus-per-worker", 3)
+    assert code == 0 and "2 matched" in stdout, err
+    summary = json.loads((out / "left.png__right.png" / "summary.json").read_text())
+    assert summary["config"]["slime"]["workers"] == 3
+    with pytest.raises(SystemExit) as stop:  # argparse: a one-line error, exit code 2
+        run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST, "--cpus-per-worker", 0)
+    assert stop.value.code == 2 and "--cpus-per-worker: expected at least 1" in capsys.readouterr().err

@@ -1,10 +1,12 @@
-"""``available_cpus``: the affinity mask and the cgroup CPU quota bound Slime's default worker count."""
+"""``available_cpus``: the affinity mask, the cgroup CPU quota and a scheduler's allotment bound Slime's default
+worker count."""
 
 import os
+import sys
 
 import pytest
 
-from slime_match._runtime.cpus import available_cpus, cgroup_cpu_quota
+from slime_match._runtime.cpus import allotted_cpus, available_cpus, cgroup_cpu_quota, ray_cpus
 from slime_match.config import make_config
 from slime_match.errors import ConfigError
 from slime_match.slime.pipeline import _workers
@@ -15,10 +17,10 @@ linux_only = pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="ne
 @linux_only
 def test_affinity_mask_bounds_the_default_workers():
     mask = os.sched_getaffinity(0)
-    assert available_cpus(membership="") == len(mask)
+    assert available_cpus(membership="", environ={}) == len(mask)
     os.sched_setaffinity(0, {min(mask)})
     try:  # what `taskset -c 0 slime match ...` or a one-core SLURM job gives
-        assert available_cpus(membership="") == 1
+        assert available_cpus(membership="", environ={}) == 1
         assert _workers(None) == 1
         assert _workers(3) == 3  # an explicit count is kept
     finally:
@@ -71,3 +73,28 @@ def test_bad_worker_counts_are_config_errors(workers):
 
 def test_a_worker_count_given_as_text_is_read_as_a_number():
     assert make_config("slime", workers="2").slime.workers == 2  # as --set slime.workers=2 reads it
+
+
+@pytest.mark.parametrize("environ, cpus", [
+    ({}, None),
+    ({"SLURM_CPUS_PER_TASK": "3"}, 3),
+    ({"SLURM_CPUS_PER_TASK": "3", "OMP_NUM_THREADS": "2"}, 2),  # the fewest
+    ({"OMP_NUM_THREADS": "2.5"}, 3),
+    ({"SLURM_CPUS_PER_TASK": "0", "OMP_NUM_THREADS": "many"}, None),  # not positive numbers: ignored
+    ({"OMP_NUM_THREADS": "", "SLURM_CPUS_PER_TASK": "-1"}, None),
+])
+def test_a_scheduler_s_allotment(environ, cpus, monkeypatch):
+    monkeypatch.delitem(sys.modules, "ray", raising=False)  # not a Ray worker
+    assert allotted_cpus(environ) == cpus
+
+
+def test_the_allotment_bounds_the_default_workers(monkeypatch):
+    monkeypatch.delitem(sys.modules, "ray", raising=False)
+    assert ray_cpus() is None
+    assert available_cpus(membership="", environ={"OMP_NUM_THREADS": "1"}) == 1
+    assert available_cpus(membership="", environ={"SLURM_CPUS_PER_TASK": "1000"}) == available_cpus(
+        membership="", environ={})  # an allotment never raises the count
+    monkeypatch.setenv("SLURM_CPUS_PER_TASK", "1")  # a one-CPU task of a SLURM job step
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    assert _workers(None) == 1
+    assert _workers(3) == 3  # an explicit count is kept

@@ -14,7 +14,7 @@ from .. import __version__
 from .._runtime import openmp, progress
 from ..choices import CAMERA_MODES
 from ..errors import ConfigError, SlimeMatchError, caused_by_interrupt
-from .match_options import add_match_options, add_workers_option, config_of, positive_int
+from .match_options import add_match_options, add_workers_option, config_of, parse_shard_option, positive_int
 
 logger = logging.getLogger("slime_match")
 
@@ -63,17 +63,32 @@ def _stage_lines(args: argparse.Namespace) -> Iterator[None]:
 
 def cmd_pairs(args: argparse.Namespace) -> int:
     from ..matcher import FEATURE_CACHE_MB
-    from ..runs.batch import INDEX_FILE, match_pairs, read_pairs
+    from ..runs.batch import match_pairs, read_pairs, reindex
+    from ..runs.index import INDEX_FILE
 
+    if args.reindex and (args.overwrite or args.ray or args.shard):
+        raise ConfigError("--reindex only rebuilds the index from the pair records and matches nothing: drop "
+                          "--overwrite, --ray and --shard")
     jobs = read_pairs(args.pairs, args.images)  # a bad pairs file or a missing image fails before any work
+    index_file = Path(args.output) / INDEX_FILE
+    if args.reindex:
+        index = reindex(jobs, args.output)
+        count = {status: sum(r["status"] == status for r in index["pairs"]) for status in ("done", "failed")}
+        if not args.quiet:
+            print(f"{len(jobs)} pairs: {count['done']} done, {count['failed']} failed, "
+                  f"{len(jobs) - len(index['pairs'])} not recorded -> {index_file}")
+        return 0
     cache_mb = FEATURE_CACHE_MB if args.feature_cache_mb is None else args.feature_cache_mb
     records = match_pairs(config_of(args), jobs, args.output, workers=args.workers, overwrite=args.overwrite,
-                          plot=args.plot, feature_cache_mb=cache_mb, progress=not args.quiet)
+                          plot=args.plot, feature_cache_mb=cache_mb, progress=not args.quiet,
+                          backend="local" if args.ray is None else "ray", ray_address=args.ray or "auto",
+                          cpus_per_worker=args.cpus_per_worker, shard=args.shard)
     count = {status: sum(r["status"] == status for r in records) for status in ("done", "skipped", "failed")}
     if args.quiet:
         return 1 if count["failed"] else 0
-    print(f"{len(records)} pairs: {count['done']} matched, {count['skipped']} already done, "
-          f"{count['failed']} failed -> {Path(args.output) / INDEX_FILE}")
+    shard = f"shard {args.shard[0]}/{args.shard[1]}: " if args.shard else ""
+    print(f"{shard}{len(records)} pairs: {count['done']} matched, {count['skipped']} already done, "
+          f"{count['failed']} failed -> {index_file}")
     matched = [r for r in records if r["status"] == "done" and "feature_sets" in r]
     if matched:
         print(f"feature cache: {sum(r['cached_feature_sets'] for r in matched)} of "
@@ -275,9 +290,24 @@ def build_parser() -> argparse.ArgumentParser:
     pairs.add_argument("--images", default=".", help="folder that relative image names are resolved against "
                                                      "(default: the current folder)")
     pairs.add_argument("-o", "--output", required=True,
-                       help="run folder: one sub-folder per pair, pairs.json (index), run.json (configuration)")
-    pairs.add_argument("--workers", type=int, default=1,
-                       help="processes matching pairs at once, sharing the CPU threads (default 1)")
+                       help="run folder: one sub-folder per pair, records/ (one record per finished pair), "
+                            "pairs.json (their index), run.json (configuration)")
+    pairs.add_argument("--workers", type=int, default=None, metavar="N",
+                       help="pairs matched at once: local processes sharing the CPUs (default 1), or with --ray "
+                            "Ray actors (default: as many as the cluster's CPUs hold)")
+    pairs.add_argument("--cpus-per-worker", type=positive_int, default=None, metavar="K",
+                       help="CPUs of each worker or Ray actor: its torch threads and Slime's forked workers "
+                            "(default: an equal share of this process's CPUs; with --ray 1)")
+    pairs.add_argument("--ray", nargs="?", const="auto", default=None, metavar="auto|ADDRESS",
+                       help="match the pairs on the actors of a Ray cluster (needs the ray extra): 'auto' (the "
+                            "default) joins the cluster started on this machine by `ray start` or named by "
+                            "RAY_ADDRESS, ADDRESS is its head's host:port; the image and run folders must have "
+                            "the same path on every node")
+    pairs.add_argument("--shard", type=parse_shard_option, default=None, metavar="I/N",
+                       help="match only part I of N of the pairs (pairs sharing images kept together), e.g. "
+                            "one part per task of a job array, all writing into the same run folder")
+    pairs.add_argument("--reindex", action="store_true",
+                       help="only rebuild pairs.json from the run folder's pair records, and match nothing")
     pairs.add_argument("--overwrite", action="store_true", help="recompute the pairs already done in the folder")
     pairs.add_argument("--plot", action="store_true", help="also draw each pair's matches.png")
     pairs.add_argument("--feature-cache-mb", type=float, default=None, metavar="MB",

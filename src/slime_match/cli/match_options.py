@@ -103,6 +103,16 @@ def positive_int(text: str) -> int:
     return value
 
 
+def parse_shard_option(text: str) -> tuple[int, int]:
+    """``--shard I/N`` -> (I, N) (an argparse type: anything but 1 <= I <= N raises ArgumentTypeError)."""
+    from ..runs.shards import parse_shard
+
+    try:
+        return parse_shard(text)
+    except ConfigError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 def parse_side(text: str) -> int | str:
     """A working-size limit of ``--min-side`` / ``--max-side``: px, ``auto`` or ``none`` (0: off) (an argparse
     type: other text raises ArgumentTypeError; MatchConfig checks the number)."""

@@ -3,60 +3,52 @@
 A pairs file lists one pair per line, two image names separated by spaces (the format of hloc's pairs
 files); blank lines and ``#`` comments are ignored, and relative names are resolved against an image folder.
 Every pair gets the folder ``OUT/<name0>__<name1>/`` (``/`` in names becomes ``-``) with the files of
-``slime match``; ``OUT/pairs.json`` indexes them and ``OUT/run.json`` records the configuration, so that a
-rerun skips the finished pairs and refuses to mix configurations.
+``slime match`` and its record ``OUT/records/<name0>__<name1>.json``; ``OUT/pairs.json`` indexes the records
+and ``OUT/run.json`` records the configuration, so that a rerun skips the finished pairs and refuses to mix
+configurations. The pairs are matched here, in spawned worker processes, or by the actors of a Ray cluster
+(:mod:`~slime_match.runs.ray_backend`); a run may also be split into shards (:mod:`~slime_match.runs.shards`)
+matched at once by several processes into one run folder.
 """
 
 from __future__ import annotations
 
 import copy
-import json
 import logging
 import multiprocessing
 import os
 import signal
 import sys
-import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from contextlib import contextmanager
 from multiprocessing.connection import Connection, wait
 from multiprocessing.context import SpawnProcess
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 from tqdm import tqdm
 
-from .. import __version__
 from .._runtime.cpus import available_cpus
+from ..choices import BATCH_BACKENDS
 from ..config import MatchConfig
 from ..errors import ConfigError, ImageError, some_of
-from ..io import jsonable, load_image, save_json
 from ..matcher import FEATURE_CACHE_MB, Matcher
-from .outputs import SUMMARY_FILE, is_complete, write_pair_outputs
+from .index import RUN_FILE, claim_run_folder, write_index, write_record
+from .outputs import is_complete
+from .pair_tasks import (
+    PairJob,
+    cached_images,
+    finished_counts,
+    job_images,
+    match_one,
+    pair_record,
+    set_threads,
+)
+from .ray_backend import check_node_cpus, connected, match_on_ray
 from .schedule import PairScheduler, RecentImages
+from .shards import check_shard, shard_positions
 
 logger = logging.getLogger("slime_match")
-
-INDEX_FILE = "pairs.json"
-RUN_FILE = "run.json"
-
-
-@dataclass(frozen=True)
-class PairJob:
-    """One line of a pairs file.
-
-    Attributes:
-        name0, name1: the image names as written in the pairs file.
-        path0, path1: the resolved image paths.
-        folder: the pair's output folder name (relative to the run folder).
-    """
-
-    name0: str
-    name1: str
-    path0: Path
-    path1: Path
-    folder: str
-
 
 def read_pairs(pairs_file: str | os.PathLike, image_dir: str | os.PathLike = ".") -> list[PairJob]:
     """Parse a pairs file and check that every image it names exists.
@@ -106,166 +98,149 @@ def _slug(name: str) -> str:
     return name.replace("\\", "/").strip("/").replace("/", "-")
 
 
-def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathLike, workers: int = 1,
+def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathLike, workers: int | None = None,
                 overwrite: bool = False, plot: bool = False, feature_cache_mb: float = FEATURE_CACHE_MB,
-                progress: bool = True) -> list[dict[str, Any]]:
-    """Match every pair into ``output/<folder>/``, skipping the pairs already finished there.
+                progress: bool = True, backend: str = "local", ray_address: str = "auto",
+                cpus_per_worker: int | None = None, shard: tuple[int, int] | None = None) -> list[dict[str, Any]]:
+    """Match every pair (of the shard) into ``output/<folder>/``, skipping the pairs already finished there.
 
     The pairs are matched in the order that best reuses each worker's feature cache
-    (:class:`~slime_match.runs.schedule.PairScheduler`); the records keep ``jobs`` order.
+    (:class:`~slime_match.runs.schedule.PairScheduler`). Each finished pair's record is written to
+    ``output/records/`` as it comes, and ``output/pairs.json`` is rebuilt from the records at the end (also
+    on an interruption).
 
     Args:
         config: the matcher configuration (the same for every pair).
         jobs: pairs from :func:`read_pairs`.
         output: the run folder.
-        workers: processes matching pairs at once; the CPU threads are split among them.
+        workers: pairs matched at once: local processes (None: 1), or Ray actors (None: as many as the
+            cluster's CPUs hold, ``cpus_per_worker`` each).
         overwrite: recompute finished pairs (and accept a run folder made with another configuration).
         plot: also draw each pair's matches.png.
-        feature_cache_mb: memory (MiB, shared by the workers) for the Slime features of recent images, reused
-            by later pairs with the same image (see :class:`Matcher`); 0 turns it off.
+        feature_cache_mb: memory (MiB) for the Slime features of recent images, reused by later pairs with
+            the same image (see :class:`Matcher`): shared by the local workers, each Ray actor's own; 0 turns
+            it off.
+        progress: a progress bar on stderr when it is a terminal.
+        backend: "local" (this machine) or "ray" (the actors of a Ray cluster).
+        ray_address: the Ray cluster, "auto" or its head's ``host:port`` (see
+            :func:`~slime_match.runs.ray_backend.connected`).
+        cpus_per_worker: CPUs of each local worker or Ray actor, the threads and Slime workers of its Matcher
+            (None: local workers share the CPUs this process may use equally, a Ray actor takes 1).
+        shard: (I, N): match only part I of N of ``jobs`` (:func:`~slime_match.runs.shards.shard_positions`);
+            the index still covers every pair of ``jobs``.
 
     Returns:
-        One record per pair, in ``jobs`` order: names, folder, status ("done", "skipped" or "failed"),
-        matches, seconds, for Slime the feature sets it used and how many of them came from the cache
-        (``feature_sets``, ``cached_feature_sets``) and, for failures, the error. The same list is written to
-        ``output/pairs.json``.
+        One record per pair matched or skipped here, in ``jobs`` order: names, folder, status ("done",
+        "skipped" or "failed"), matches, seconds, for Slime the feature sets it used and how many of them came
+        from the cache (``feature_sets``, ``cached_feature_sets``) and, for failures, the error. pairs.json
+        lists the records of every pair of ``jobs`` that has one ("done" or "failed"), and ``finished`` when
+        every pair has one.
 
     Raises:
-        ConfigError: ``workers`` < 1, or ``output`` holds a run with another configuration.
+        ConfigError: a bad worker count, backend or shard, Ray missing or unreachable, or ``output`` holding a
+            run with another configuration.
     """
-    if workers < 1:
+    if workers is not None and workers < 1:
         raise ConfigError(f"workers must be >= 1, got {workers}")
+    if cpus_per_worker is not None and cpus_per_worker < 1:
+        raise ConfigError(f"cpus per worker must be >= 1, got {cpus_per_worker}")
+    if backend not in BATCH_BACKENDS:
+        raise ConfigError(f"unknown backend {backend!r}: expected one of {', '.join(BATCH_BACKENDS)}")
+    if shard is not None:
+        check_shard(shard)
     out = Path(output)
-    # resolves "auto" choices and fails early on missing weights or a missing GPU (and a bad cache budget)
-    matcher = Matcher(config, feature_cache_mb=feature_cache_mb)
-    _claim_run_folder(out, matcher.config, overwrite)
-    records: dict[int, dict[str, Any]] = {}
-    todo = []
-    for index, job in enumerate(jobs):
-        if not overwrite and is_complete(out / job.folder):
-            records[index] = _record(job, "skipped", **_finished_counts(out / job.folder))
+    # a missing Ray, no cluster or no node of cpus_per_worker CPUs fail before the run folder is touched
+    with _cluster(backend, ray_address, cpus_per_worker or 1) as ray:
+        # resolves "auto" choices and fails early on missing weights or a missing GPU (and a bad cache budget)
+        matcher = Matcher(config, feature_cache_mb=feature_cache_mb)
+        claim_run_folder(out, matcher.config, overwrite)
+        selected = range(len(jobs)) if shard is None else shard_positions([job_images(j) for j in jobs], *shard)
+        records: dict[int, dict[str, Any]] = {}
+        todo = []
+        for index in selected:
+            if not overwrite and is_complete(out / jobs[index].folder):
+                records[index] = pair_record(jobs[index], "skipped", **finished_counts(out / jobs[index].folder))
+            else:
+                todo.append(index)
+        bar = tqdm(total=len(selected), initial=len(records), desc="pairs", unit="pair", file=sys.stderr,
+                   disable=None if progress else True)  # None: a bar only when stderr is a terminal
+        if ray is not None and todo:
+            finished = match_on_ray(ray, matcher.config, jobs, todo, out, plot, workers, cpus_per_worker or 1,
+                                    feature_cache_mb)
+        elif (workers or 1) == 1 or len(todo) <= 1:
+            finished = _match_in_process(matcher, jobs, todo, out, plot)
         else:
-            todo.append(index)
-    progress = tqdm(total=len(jobs), initial=len(records), desc="pairs", unit="pair", file=sys.stderr,
-                    disable=None if progress else True)  # None: a bar only when stderr is a terminal
-    if workers == 1 or len(todo) <= 1:
-        finished = _match_in_process(matcher, jobs, todo, out, plot)
-    else:
-        finished = _match_in_workers(matcher, jobs, todo, out, plot, workers, feature_cache_mb / workers)
-    try:
-        for index, record in finished:
-            records[index] = record
-            if record["status"] == "failed":
-                logger.warning("%s %s: %s", record["image0"], record["image1"], record["error"])
-            progress.set_postfix_str(f"{record['image0']} {record['image1']}: {record['matches'] or 0} matches")
-            progress.update()
-    finally:
-        finished.close()  # stops the workers when the loop ends early
-        progress.close()
-        ordered = [records[i] for i in sorted(records)]
-        save_json(out / INDEX_FILE, {"pairs": ordered, "finished": len(records) == len(jobs)})
-    return ordered
+            finished = _match_in_workers(matcher, jobs, todo, out, plot, workers, cpus_per_worker,
+                                         feature_cache_mb / workers)
+        try:
+            for index, record in finished:
+                write_record(out, record)
+                records[index] = record
+                if record["status"] == "failed":
+                    logger.warning("%s %s: %s", record["image0"], record["image1"], record["error"])
+                bar.set_postfix_str(f"{record['image0']} {record['image1']}: {record['matches'] or 0} matches")
+                bar.update()
+        finally:
+            finished.close()  # stops the workers when the loop ends early
+            bar.close()
+            write_index(out, jobs)
+        return [records[i] for i in sorted(records)]
 
 
-def _claim_run_folder(out: Path, config: MatchConfig, overwrite: bool) -> None:
-    """Record the configuration in ``out/run.json``; refuse to resume a run made with another one."""
-    current = jsonable(config.to_dict())
-    run_file = out / RUN_FILE
-    if run_file.is_file() and not overwrite:
-        previous = json.loads(run_file.read_text()).get("config")
-        if previous != current:
-            changed = sorted(_differences(previous or {}, current))
-            raise ConfigError(f"{out} holds a run made with another configuration (differs in: "
-                              f"{', '.join(changed) or 'everything'}): use another output folder or --overwrite")
+@contextmanager
+def _cluster(backend: str, address: str, threads: int) -> Iterator[ModuleType | None]:
+    """Within the block, the ``ray`` module connected to the cluster at ``address`` that has a node of
+    ``threads`` CPUs, for the "ray" backend (None for "local")."""
+    if backend != "ray":
+        yield None
         return
-    save_json(run_file, {"slime_match_version": __version__, "config": current})
+    with connected(address) as ray:
+        check_node_cpus(ray, threads)
+        yield ray
 
 
-def _differences(a: dict, b: dict, prefix: str = "") -> list[str]:
-    """Dotted keys whose values differ between two nested dicts."""
-    keys = []
-    for key in sorted(set(a) | set(b)):
-        va, vb = a.get(key), b.get(key)
-        if isinstance(va, dict) and isinstance(vb, dict):
-            keys += _differences(va, vb, f"{prefix}{key}.")
-        elif va != vb:
-            keys.append(prefix + key)
-    return keys
+def reindex(jobs: list[PairJob], output: str | os.PathLike) -> dict[str, Any]:
+    """Rebuild ``output/pairs.json`` from the records of ``jobs`` (see :func:`~slime_match.runs.index.
+    write_index`), and return it.
 
-
-def _record(job: PairJob, status: str, matches: int | None = None, seconds: float | None = None,
-            error: str | None = None, **cache: int) -> dict[str, Any]:
-    """A pair's entry of pairs.json; ``cache``: Slime's ``feature_sets`` and ``cached_feature_sets``."""
-    record = {"image0": job.name0, "image1": job.name1, "folder": job.folder, "status": status,
-              "matches": matches, "seconds": seconds, **cache}
-    if error is not None:
-        record["error"] = error
-    return record
-
-
-def _cache_counts(counts: dict[str, Any]) -> dict[str, int]:
-    """The feature-set counts of a Slime summary's ``counts`` (none for the other methods)."""
-    return {key: counts[key] for key in ("feature_sets", "cached_feature_sets") if key in counts}
-
-
-def _finished_counts(folder: Path) -> dict[str, Any]:
-    summary = json.loads((folder / SUMMARY_FILE).read_text())
-    return {"matches": summary["counts"]["matches"], "seconds": summary["seconds"]["total"],
-            **_cache_counts(summary["counts"])}
-
-
-def _match_one(matcher: Matcher, job: PairJob, out: Path, plot: bool) -> dict[str, Any]:
-    """Match one pair and write its folder; a failure (bad image, bug) is recorded, not raised."""
-    start = time.perf_counter()
-    try:
-        image0, image1 = load_image(job.path0), load_image(job.path1)
-        result = matcher(image0, image1)
-        write_pair_outputs(result, image0, image1, out / job.folder, plot=plot)
-    except ImageError as error:
-        return _record(job, "failed", seconds=round(time.perf_counter() - start, 4), error=str(error))
-    except Exception as error:  # one pair must not end a long run; the record says what happened
-        logger.exception("pair %s %s failed", job.name0, job.name1)
-        return _record(job, "failed", seconds=round(time.perf_counter() - start, 4),
-                       error=f"{type(error).__name__}: {error}")
-    return _record(job, "done", len(result), result.summary["seconds"]["total"],
-                   **_cache_counts(result.summary["counts"]))
+    Raises:
+        ConfigError: ``output`` is not a run folder (no run.json).
+    """
+    out = Path(output)
+    if not (out / RUN_FILE).is_file():
+        raise ConfigError(f"{out} is not a `slime pairs` run folder (no {RUN_FILE} in it)")
+    return write_index(out, jobs)
 
 
 def _match_in_process(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool
                       ) -> Iterator[tuple[int, dict[str, Any]]]:
     """(index, record) of the ``todo`` pairs matched here, in the order that best reuses the feature cache."""
-    scheduler = PairScheduler([_images(jobs[index]) for index in todo])
+    scheduler = PairScheduler([job_images(jobs[index]) for index in todo])
     recent = RecentImages()
-    while (position := scheduler.next(recent.held(_cached_images(matcher)))) is not None:
+    while (position := scheduler.next(recent.held(cached_images(matcher)))) is not None:
         job = jobs[todo[position]]
-        record = _match_one(matcher, job, out, plot)
-        recent.touch(_images(job))
+        record = match_one(matcher, job, out, plot)
+        recent.touch(job_images(job))
         yield todo[position], record
 
 
-def _images(job: PairJob) -> tuple[str, str]:
-    return str(job.path0), str(job.path1)
-
-
-def _cached_images(matcher: Matcher) -> int:
-    return 0 if matcher.level_cache is None else matcher.level_cache.image_count
-
-
 def _match_in_workers(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool,
-                      workers: int, feature_cache_mb: float) -> Iterator[tuple[int, dict[str, Any]]]:
+                      workers: int, cpus_per_worker: int | None, feature_cache_mb: float
+                      ) -> Iterator[tuple[int, dict[str, Any]]]:
     """(index, record) of the ``todo`` pairs as they finish in ``workers`` spawned processes.
 
-    Each worker has a Matcher of ``matcher``'s configuration, a feature cache of ``feature_cache_mb`` and an
-    equal share of the available CPUs (``available_cpus``: torch threads and Slime's own forked workers). A
+    Each worker has a Matcher of ``matcher``'s configuration, a feature cache of ``feature_cache_mb`` and
+    ``cpus_per_worker`` CPUs, by default an equal share of the available CPUs (``available_cpus``): its torch
+    threads and Slime's own forked workers. A
     worker that finishes a pair is given the pair that best reuses the images its cache holds
     (:class:`PairScheduler`). A worker that dies (killed, out of memory) fails its pair and is replaced. On an
     interruption the workers are stopped at once (a pair's files are written all or nothing).
     """
-    share = max(1, available_cpus() // workers)
+    share = cpus_per_worker or max(1, available_cpus() // workers)
     config = copy.deepcopy(matcher.config)
     if config.slime.workers is None:
         config.slime.workers = share
-    scheduler = PairScheduler([_images(jobs[index]) for index in todo])
+    scheduler = PairScheduler([job_images(jobs[index]) for index in todo])
     context = multiprocessing.get_context("spawn")  # not fork: a forked copy of torch's thread pools can deadlock
     running: dict[Connection, tuple[SpawnProcess, int]] = {}  # a worker's pipe -> it and its pair (todo position)
     stopping: list[tuple[Connection, SpawnProcess]] = []  # workers told that no pair is left
@@ -291,8 +266,8 @@ def _match_in_workers(matcher: Matcher, jobs: list[PairJob], todo: list[int], ou
                 except (EOFError, OSError):  # the worker died in this pair
                     process.join()
                     pipe.close()
-                    record = _record(jobs[todo[position]], "failed", error="the worker process died (exit code "
-                                     f"{process.exitcode}; out of memory?)")
+                    record = pair_record(jobs[todo[position]], "failed", error="the worker process died (exit "
+                                         f"code {process.exitcode}; out of memory?)")
                     if len(scheduler):
                         start_worker(scheduler.next())
                 else:
@@ -323,15 +298,11 @@ def _worker_main(pipe: Connection, config: MatchConfig, threads: int, feature_ca
                  plot: bool) -> None:
     """A worker of :func:`_match_in_workers`: match the pairs it is sent (None: stop), answering each with its
     record and the images its feature cache holds, the most recently used first."""
-    import numba
-    import torch
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle: it stops the workers
-    torch.set_num_threads(threads)
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    set_threads(threads)
     matcher = Matcher(config, feature_cache_mb=feature_cache_mb)
     recent = RecentImages()
     while (job := pipe.recv()) is not None:
-        record = _match_one(matcher, job, out, plot)
-        recent.touch(_images(job))
-        pipe.send((record, recent.held(_cached_images(matcher))))
+        record = match_one(matcher, job, out, plot)
+        recent.touch(job_images(job))
+        pipe.send((record, recent.held(cached_images(matcher))))

@@ -26,7 +26,7 @@ from ..errors import ConfigError, ImageError, SlimeMatchError, some_of
 from ..io import current_umask, load_npz
 from ..matching.nn_kernels import greedy_accept
 from ..slime.clusters import greedy_clusters
-from .batch import INDEX_FILE
+from .index import INDEX_FILE
 from .outputs import MATCHES_FILE
 
 
