@@ -6,7 +6,7 @@ import pytest
 from slime_match.errors import ConfigError
 from slime_match.slime.dtm_frame import dtm_frame
 from slime_match.slime.pipeline import SlimeConfig
-from slime_match.slime.refine import final_matches, global_dtm, TileMatches
+from slime_match.slime.refine import TileMatches, final_matches, global_dtm
 
 
 def rotation(angle: float) -> np.ndarray:
@@ -68,7 +68,7 @@ def test_degenerate_or_too_few_matches_keep_the_own_frame():
 @pytest.mark.parametrize("seed", [0, 1])
 def test_under_a_strong_tilt_the_global_dtm_keeps_the_plane_not_the_compact_wrong_cluster(seed):
     xy0, xy1, scores = tilted_plane_and_wrong_cluster(12.0, seed)
-    correct = lambda k0, k1: np.linalg.norm(k0 @ tilted(12.0).T + [100, 300] - k1, axis=1) < 3  # noqa: E731
+    correct = lambda k0, k1: np.linalg.norm(k0 @ tilted(12.0).T + [100, 300] - k1, axis=1) < 3
     k0, k1, _, frame = global_dtm(xy0, xy1, scores, (600, 600), (800, 800))
     assert frame.affine is not None and correct(k0, k1).sum() >= 190 and not (~correct(k0, k1)).any()
     k0, k1, _, frame = global_dtm(xy0, xy1, scores, (600, 600), (800, 800), max_tilt=np.inf)  # the paper's

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..matching.delaunay import MAX_SIDE
 
-__all__ = ["DTMFrame", "dtm_frame", "DTM_MAX_TILT"]
+__all__ = ["DTM_MAX_TILT", "DTMFrame", "dtm_frame"]
 
 DTM_MAX_TILT = 2.0  # above this tilt of the matches' affine map, image 0 is compared in image 1's frame
 AFFINE_TOLERANCE = 0.02  # RANSAC inlier distance of the global affine fit, as a fraction of image 1's diagonal

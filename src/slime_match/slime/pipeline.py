@@ -24,9 +24,9 @@ from .._runtime.cpus import available_cpus
 from .._runtime.forking import torch_threads
 from .._runtime.options import check_choice, check_integer
 from .._runtime.timing import StageTimer
+from ..errors import ConfigError
 from ..geometry.frames import Frame, homographies_to_original
 from ..geometry.ransac import HomographyRansacConfig
-from ..errors import ConfigError
 from ..pipelines import BasePipeline
 from ..views import ViewConfig, ViewRecord
 from .block_planes import BlockPlanes, block_planes
