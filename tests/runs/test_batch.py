@@ -4,7 +4,6 @@ import itertools
 import json
 import multiprocessing
 import os
-import shutil
 import signal
 import threading
 import time
@@ -24,15 +23,10 @@ SLIME_SMALL = ["--shape", "baumberg", "--orientation", "gradient", "--descriptor
 
 
 @pytest.fixture
-def images(pair, tmp_path):
-    """A folder with the stereo pair (left.png, right.png), a copy in a sub-folder and a corrupt image."""
-    folder = tmp_path / "images"
-    (folder / "sub").mkdir(parents=True)
-    shutil.copy(pair[0], folder / "left.png")
-    shutil.copy(pair[1], folder / "right.png")
-    shutil.copy(pair[1], folder / "sub" / "right.png")
-    (folder / "broken.png").write_bytes(b"\x89PNG not really")
-    return folder
+def images(images):
+    """The batch folder (conftest) with a corrupt image besides."""
+    (images / "broken.png").write_bytes(b"\x89PNG not really")
+    return images
 
 
 def _pairs_file(tmp_path, text):

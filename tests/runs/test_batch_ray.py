@@ -44,17 +44,6 @@ def cluster():
         cluster.shutdown()
 
 
-@pytest.fixture
-def images(pair, tmp_path):
-    """A folder with the stereo pair (left.png, right.png) and a copy of right.png in a sub-folder."""
-    folder = tmp_path / "images"
-    (folder / "sub").mkdir(parents=True)
-    shutil.copy(pair[0], folder / "left.png")
-    shutil.copy(pair[1], folder / "right.png")
-    shutil.copy(pair[1], folder / "sub" / "right.png")
-    return folder
-
-
 def test_a_ray_run_writes_what_a_local_run_writes_and_resumes(cluster, images, tmp_path, capsys):
     pairs = tmp_path / "pairs.txt"
     pairs.write_text(PAIRS)

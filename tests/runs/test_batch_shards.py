@@ -57,16 +57,6 @@ def test_bad_shards_are_refused(text, tmp_path, capsys):
     assert not (tmp_path / "run").exists()
 
 
-@pytest.fixture
-def images(pair, tmp_path):
-    folder = tmp_path / "images"
-    (folder / "sub").mkdir(parents=True)
-    shutil.copy(pair[0], folder / "left.png")
-    shutil.copy(pair[1], folder / "right.png")
-    shutil.copy(pair[1], folder / "sub" / "right.png")
-    return folder
-
-
 def test_concurrent_shards_keep_every_record_and_reindex_rebuilds_the_index(images, tmp_path, capsys):
     pairs = tmp_path / "pairs.txt"
     pairs.write_text(PAIRS)
