@@ -19,7 +19,7 @@
     stages: null, layers: {}, hover: null,  // hover: {layer, label} of the plane or set under the pointer
     job: null, polling: null,
     annot: { pairs: [], pending: null, set: 0, selected: -1, history: [], fit: null, fixedH: null,
-      cursor: null, model: "H", epiline: null, reprojected: null, fitting: 0 },
+      cursor: null, model: "H", epiline: null, reprojected: null, fitting: 0, saved: "" },
     frameTimes: [],
   };
 
@@ -771,6 +771,7 @@
   }
 
   function annotationsChanged() {
+    S.annot.saved = "";  // a save's message stands until the annotations change
     $("ann-set").textContent = String(S.annot.set);
     renderPairsTable();
     view.redraw();
@@ -793,6 +794,7 @@
     parts.push(A.fit.F ? "F: fitted" : `F: needs ${A.fit.min_pairs.F} pairs`);
     const res = (A.model === "H" ? A.fit.residual_H : A.fit.residual_F).filter((r) => r !== null);
     if (res.length) parts.push(`mean residual ${fmt(res.reduce((a, b) => a + b, 0) / res.length, 2)} px`);
+    if (A.saved) parts.push(A.saved);  // a fit that answers after a save keeps its message
     $("ann-status").textContent = parts.join("\n");
     view.redraw();
   }
@@ -920,7 +922,8 @@
     const body = { name: $("ann-name").value.trim(), model: S.annot.model, image0: S.images[0], image1: S.images[1],
       pairs: S.annot.pairs, overwrite: $("ann-overwrite").checked };
     const out = await api("/api/annotate/save", { method: "POST", json: body });
-    $("ann-status").textContent = `saved (${out.kind}): ${out.files.join(", ")} in the annotation folder`;
+    S.annot.saved = `saved (${out.kind}): ${out.files.join(", ")} in the annotation folder`;
+    $("ann-status").textContent = S.annot.saved;
     await listSaved();
   }
   async function downloadAnnotation() {
