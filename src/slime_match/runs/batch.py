@@ -35,20 +35,13 @@ from ..errors import ConfigError, ImageError, some_of
 from ..matcher import FEATURE_CACHE_MB, Matcher
 from .index import RUN_FILE, claim_run_folder, write_index, write_record
 from .outputs import is_complete
-from .pair_tasks import (
-    PairJob,
-    cached_images,
-    finished_counts,
-    job_images,
-    match_one,
-    pair_record,
-    set_threads,
-)
+from .pair_tasks import PairJob, PairWorker, finished_counts, job_images, pair_record, set_threads
 from .ray_backend import check_node_cpus, connected, match_on_ray
-from .schedule import PairScheduler, RecentImages
+from .schedule import PairScheduler
 from .shards import check_shard, shard_positions
 
 logger = logging.getLogger("slime_match")
+
 
 def read_pairs(pairs_file: str | os.PathLike, image_dir: str | os.PathLike = ".") -> list[PairJob]:
     """Parse a pairs file and check that every image it names exists.
@@ -216,12 +209,9 @@ def _match_in_process(matcher: Matcher, jobs: list[PairJob], todo: list[int], ou
                       ) -> Iterator[tuple[int, dict[str, Any]]]:
     """(index, record) of the ``todo`` pairs matched here, in the order that best reuses the feature cache."""
     scheduler = PairScheduler([job_images(jobs[index]) for index in todo])
-    recent = RecentImages()
-    while (position := scheduler.next(recent.held(cached_images(matcher)))) is not None:
-        job = jobs[todo[position]]
-        record = match_one(matcher, job, out, plot)
-        recent.touch(job_images(job))
-        yield todo[position], record
+    worker = PairWorker(matcher, out, plot)
+    while (position := scheduler.next(worker.held())) is not None:
+        yield todo[position], worker.match(jobs[todo[position]])
 
 
 def _match_in_workers(matcher: Matcher, jobs: list[PairJob], todo: list[int], out: Path, plot: bool,
@@ -300,9 +290,7 @@ def _worker_main(pipe: Connection, config: MatchConfig, threads: int, feature_ca
     record and the images its feature cache holds, the most recently used first."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle: it stops the workers
     set_threads(threads)
-    matcher = Matcher(config, feature_cache_mb=feature_cache_mb)
-    recent = RecentImages()
+    worker = PairWorker(Matcher(config, feature_cache_mb=feature_cache_mb), out, plot)
     while (job := pipe.recv()) is not None:
-        record = match_one(matcher, job, out, plot)
-        recent.touch(job_images(job))
-        pipe.send((record, recent.held(cached_images(matcher))))
+        record = worker.match(job)
+        pipe.send((record, worker.held()))

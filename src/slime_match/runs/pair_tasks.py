@@ -14,6 +14,7 @@ from ..errors import ImageError
 from ..io import load_image
 from ..matcher import Matcher
 from .outputs import SUMMARY_FILE, write_pair_outputs
+from .schedule import RecentImages
 
 logger = logging.getLogger("slime_match")
 
@@ -79,9 +80,24 @@ def job_images(job: PairJob) -> tuple[str, str]:
     return str(job.path0), str(job.path1)
 
 
-def cached_images(matcher: Matcher) -> int:
-    """How many images' features the matcher's cache holds."""
-    return 0 if matcher.level_cache is None else matcher.level_cache.image_count
+class PairWorker:
+    """A Matcher matching pairs one after another into the run folder ``out`` (this process, a spawned worker
+    or a Ray actor), and the images whose features its cache holds."""
+
+    def __init__(self, matcher: Matcher, out: Path, plot: bool) -> None:
+        self.matcher, self.out, self.plot = matcher, out, plot
+        self._recent = RecentImages()
+
+    def match(self, job: PairJob) -> dict[str, Any]:
+        """Match one pair (:func:`match_one`) and remember its images; its record."""
+        record = match_one(self.matcher, job, self.out, self.plot)
+        self._recent.touch(job_images(job))
+        return record
+
+    def held(self) -> list[str]:
+        """The images the feature cache holds, the most recently used first (for ``PairScheduler.next``)."""
+        cache = self.matcher.level_cache
+        return self._recent.held(0 if cache is None else cache.image_count)
 
 
 def set_threads(threads: int) -> None:

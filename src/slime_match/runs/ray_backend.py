@@ -20,8 +20,8 @@ from typing import Any
 from ..config import MatchConfig
 from ..errors import ConfigError, SlimeMatchError
 from ..matcher import Matcher
-from .pair_tasks import PairJob, cached_images, job_images, match_one, pair_record, set_threads
-from .schedule import PairScheduler, RecentImages
+from .pair_tasks import PairJob, PairWorker, job_images, pair_record, set_threads
+from .schedule import PairScheduler
 
 logger = logging.getLogger("slime_match")
 
@@ -91,9 +91,7 @@ class PairActor:
 
     def __init__(self, config: MatchConfig, threads: int, feature_cache_mb: float, out: Path, plot: bool) -> None:
         set_threads(threads)
-        self._matcher = Matcher(config, feature_cache_mb=feature_cache_mb)
-        self._recent = RecentImages()
-        self._out, self._plot = out, plot
+        self._worker = PairWorker(Matcher(config, feature_cache_mb=feature_cache_mb), out, plot)
 
     def ready(self) -> bool:
         """True once the actor is built (its answer tells the driver that the actor may take pairs)."""
@@ -102,9 +100,7 @@ class PairActor:
     def match(self, job: PairJob) -> tuple[dict[str, Any], list[str]]:
         """Match a pair into its folder: its record, and the images the feature cache holds (most recent
         first)."""
-        record = match_one(self._matcher, job, self._out, self._plot)
-        self._recent.touch(job_images(job))
-        return record, self._recent.held(cached_images(self._matcher))
+        return self._worker.match(job), self._worker.held()
 
 
 def check_node_cpus(ray: ModuleType, threads: int) -> None:
