@@ -155,12 +155,22 @@ def views_of_tilt(tilt: float) -> list[float]:
 
 @dataclass
 class ViewRecord:
-    """What the view synthesis did for one pair (for ``summary.json``)."""
+    """What the view synthesis did for one pair (for ``summary.json``).
+
+    Attributes:
+        mode: the ``ViewConfig.mode``.
+        tilts: the tilts tried, in order; views: how many views they simulated.
+        reason: why the views stopped (or why none was tried).
+        found: Slime only, per tilt tried: its ``views``, the block ``planes`` they found and the matches of
+            F^theta on those planes (``ftheta_matches``; 0 when the views' planes were dropped).
+    """
 
     mode: str
     tilts: list[float] = field(default_factory=list)
     views: int = 0
     reason: str = "views off"
+    found: list[dict] = field(default_factory=list)
 
     def as_dict(self) -> dict:
-        return {"mode": self.mode, "tilts": self.tilts, "views": self.views, "reason": self.reason}
+        out = {"mode": self.mode, "tilts": self.tilts, "views": self.views, "reason": self.reason}
+        return {**out, "found": self.found} if self.found else out

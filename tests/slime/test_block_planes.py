@@ -17,6 +17,7 @@ from slime_match.slime.block_planes import (
     match_block_pairs,
 )
 from slime_match.slime.blocks import make_blocks
+from slime_match.slime.fixed_descriptors import FixedDescriptors
 from slime_match.slime.levels import build_levels
 from slime_match.slime.match_table import deduplicate
 
@@ -107,6 +108,34 @@ def test_block_planes_gathers_the_refined_planes_in_original_pixels(levels):
     np.testing.assert_array_equal(arrays["block_matches_plane"], raw.source)
     np.testing.assert_array_equal(arrays["table_weight"], table.weight)
     assert arrays["table_weight"].sum() == len(raw)
+
+
+def test_a_shared_fixed_descriptors_describes_image_1_once(levels, monkeypatch):
+    """The plain blocks and the simulated views pair image 0's levels with the same image-1 levels: with one
+    ``FixedDescriptors`` for both calls, the second describes none of image 1's features again and finds the
+    same planes as with a fresh one."""
+    pipeline, blocks, _, _, _ = levels
+    image, moved = _moved_squares()
+    levels1 = build_levels(pipeline, moved, blocks)
+    ransac = HomographyRansacConfig(threshold=15.0)
+    shared = FixedDescriptors(pipeline, 16)
+    first = block_planes(pipeline, build_levels(pipeline, image, blocks), levels1, blocks, blocks, ransac,
+                         fixed=shared)
+    described = []  # the contexts (images) of every fixed-orientation description
+    describe = pipeline.describe_fixed
+    monkeypatch.setattr(pipeline, "describe_fixed",
+                        lambda context, *rest: described.append(context) or describe(context, *rest))
+    levels0 = build_levels(pipeline, image, blocks)  # new level objects: as a view's are
+    again = block_planes(pipeline, levels0, levels1, blocks, blocks, ransac, fixed=shared)
+    second = list(described)
+    fresh = block_planes(pipeline, levels0, levels1, blocks, blocks, ransac)
+    assert len(first.H) > 0 and first.counts["block_pairs_rerun"] > 0
+    image1 = {id(level.context) for level in levels1}
+    assert second and not image1 & {id(context) for context in second}  # image 0's only
+    assert image1 & {id(context) for context in described[len(second):]}  # a fresh one describes image 1 too
+    for field in dataclasses.fields(fresh.level_matches):
+        np.testing.assert_array_equal(getattr(again.level_matches, field.name),
+                                      getattr(fresh.level_matches, field.name))
 
 
 def test_a_plane_counts_distinct_keypoints():

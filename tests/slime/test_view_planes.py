@@ -21,11 +21,17 @@ def test_slime_view_planes_hold_the_pairs_geometry(graf_small):  # noqa: F811
     result = Matcher(make_config("slime", views="always", scales=(1, 2), keep_stages=True,
                                  **{"views.tilts": (2.0,)}, **WEIGHT_FREE))(a, b)
     views = result.summary["decisions"]["views"]
+    found = views.pop("found")
     assert views == {"mode": "always", "tilts": [2.0], "views": 5, "reason": "every tilt tried"}
     assert result.summary["counts"]["views"] == 5
     stages = result.stages
     from_view = stages["planes_pairs"][:, 0] >= len(stages["blocks0"])
     assert from_view.sum() >= 5, "the views of a 40-degree viewpoint change give planes"
+    assert found[0]["tilt"] == 2.0 and found[0]["views"] == 5 and found[0]["planes"] == from_view.sum()
+    on_view_planes = np.zeros(len(stages["table_xy0"]), bool)  # F^theta's matches on the views' planes
+    for s in np.flatnonzero(from_view[stages["ftheta_plane"]]):
+        on_view_planes[stages["ftheta_indices"][stages["ftheta_indptr"][s]:stages["ftheta_indptr"][s + 1]]] = True
+    assert found[0]["ftheta_matches"] == on_view_planes.sum() > 0
     in_view = from_view[stages["block_matches_plane"]]
     xy0, xy1 = stages["block_matches_xy0"][in_view], stages["block_matches_xy1"][in_view]
     ok = correct_matches_homography(xy0, xy1, h)
@@ -53,6 +59,7 @@ def test_auto_views_stop_when_the_plain_run_agrees_and_leave_it_when_they_find_n
     unreached = Matcher(make_config("slime", **{"views.tilts": (2.0,), "views.min_support": 10**9}, **options))(a, b)
     record = unreached.summary["decisions"]["views"]
     assert record["views"] == 5 and record["tilts"] == [2.0] and "alone are kept" in record["reason"]
+    assert record["found"][0]["planes"] > 0 and record["found"][0]["ftheta_matches"] == 0  # dropped
     for other in (result, unreached):  # auto without views, or with views dropped = off
         np.testing.assert_array_equal(other.keypoints0, off.keypoints0)
         np.testing.assert_array_equal(other.keypoints1, off.keypoints1)

@@ -130,7 +130,8 @@ def _protocol_tables(summary: dict[str, Any], agg: dict[str, Any]) -> list[str]:
         )
     lines += [
         "",
-        "### Standard protocols per pair (pair mAA; the tilts of the simulated views a run added)",
+        "### Standard protocols per pair (pair mAA; the tilts of the simulated views a run added [Slime: the "
+        "matches of F^theta on their planes])",
         "",
         "| Pair | Protocol | " + " | ".join(title[m] for m in methods) + " |",
         "| --- | --- | " + " | ".join("---" for _ in methods) + " |",
@@ -144,10 +145,13 @@ def _protocol_tables(summary: dict[str, Any], agg: dict[str, Any]) -> list[str]:
 
 
 def _views_note(views: dict[str, Any] | None) -> str:
-    """" (views: tilt 2, 4)" when a run added simulated views, else ""."""
+    """" (views: tilt 2, 4)" when a run added simulated views, else ""; Slime's runs add the F^theta matches
+    each tilt's planes hold, " (views: tilt 2 [0], 4 [63])"."""
     if not views or not views.get("views"):
         return ""
-    return f" (views: tilt {', '.join(f'{t:g}' for t in views['tilts'])})"
+    found = {f["tilt"]: f["ftheta_matches"] for f in views.get("found", [])}
+    return " (views: tilt " + ", ".join(f"{t:g}" + (f" [{found[t]}]" if t in found else "")
+                                        for t in views["tilts"]) + ")"
 
 
 def csv_table(summary: dict[str, Any], agg: dict[str, Any]) -> str:

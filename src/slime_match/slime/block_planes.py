@@ -104,19 +104,22 @@ def match_block_pairs(
     min_matches: int = 8,
     seed: int = 0,
     workers: int = 1,
+    fixed: FixedDescriptors | None = None,
 ) -> tuple[BlockPairMatches, dict[str, int]]:
     """Secs. 3.2 + 3.3 for every block pair: base pipeline + homography RANSAC, then the re-run with
     fixed orientations (theta = 0 in image 0, theta* in image 1) + RANSAC -> M_l and H_l.
 
     A plane needs ``min_matches`` RANSAC inliers with as many distinct keypoints in each image (the base
-    pipeline may match one keypoint several times).
+    pipeline may match one keypoint several times). ``fixed`` holds the fixed-orientation descriptors of
+    earlier calls on the same levels (image 1's, shared by the plain blocks and the simulated views); None
+    starts an empty one.
 
     Returns:
         The refined planes and their matches, in level pixels, and counts for the summary: block pairs,
         first-run planes, pairs re-matched under fixed orientations (on an upright base none: the first run's
         matches are reused, ``BasePipeline.own_frames_upright``) and refined planes.
     """
-    fixed = FixedDescriptors(pipeline, bins, workers)
+    fixed = fixed if fixed is not None else FixedDescriptors(pipeline, bins, workers)
     side0, side1 = _BlockSide(levels0, blocks0, fixed), _BlockSide(levels1, blocks1, fixed)
     pairs = [(w0, w1) for w0 in range(len(blocks0)) for w1 in range(len(blocks1))]
 
@@ -271,11 +274,11 @@ class BlockPlanes:
 
 def block_planes(pipeline: BasePipeline, levels0: list[ScaleLevel], levels1: list[ScaleLevel], blocks0: list[Block],
                  blocks1: list[Block], ransac: HomographyRansacConfig, bins: int = 16, min_matches: int = 8,
-                 seed: int = 0, workers: int = 1) -> BlockPlanes:
+                 seed: int = 0, workers: int = 1, fixed: FixedDescriptors | None = None) -> BlockPlanes:
     """Secs. 3.2-3.3 (``match_block_pairs``, same arguments), the planes mapped to original pixels and their
     matches gathered in one deduplicated match table."""
     matches, counts = match_block_pairs(pipeline, levels0, levels1, blocks0, blocks1, ransac, bins=bins,
-                                        min_matches=min_matches, seed=seed, workers=workers)
+                                        min_matches=min_matches, seed=seed, workers=workers, fixed=fixed)
     raw, h, side = block_planes_to_original(matches, blocks0, blocks1)
     table, _ = deduplicate(raw)
     counts.update(block_matches=len(raw), block_matches_unique=len(table))

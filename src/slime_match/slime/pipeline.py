@@ -34,11 +34,12 @@ from .blocks import Block, BlockConfig, make_blocks, make_tiles
 from .diagnostics import empty_result_reason, layout_warning, tile_count_warning
 from .dtm_frame import DTM_MAX_TILT
 from .expansion import Expansion, PlaneConfig, expand_planes
+from .fixed_descriptors import FixedDescriptors
 from .level_cache import LevelCache, feature_levels
 from .levels import DETECTIONS, LevelRequest
 from .refine import TILE_TESTS, FlowGuide, PlaneGuide, TileMatches, final_matches, match_tiles, tile_test
 from .selection import PlaneSelection, select_planes
-from .tile_sets import TileConfig
+from .tile_sets import TileConfig, TileSets
 from .view_planes import view_planes
 
 logger = logging.getLogger("slime_match")
@@ -196,14 +197,17 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
             requests += [LevelRequest(image, tiles, regions_only=True, detection=config.tile_detection)
                          for image, tiles in ((image0, layout.tiles0), (image1, layout.tiles1))]
         features = feature_levels(pipeline, requests, workers, level_cache)
+    fixed = FixedDescriptors(pipeline, config.bins, workers)  # image 1's serve the plain blocks and the views
     with timer("block_pairs"), torch_threads(1):
         planes = block_planes(pipeline, *features.levels[:2], layout.blocks0, layout.blocks1, config.ransac,
-                              bins=config.bins, min_matches=config.min_plane_matches, seed=seed, workers=workers)
+                              bins=config.bins, min_matches=config.min_plane_matches, seed=seed, workers=workers,
+                              fixed=fixed)
     expansion, selection = _select(planes, layout, config, workers, timer)
     record = ViewRecord(views.mode)
     if views.mode != "off":
         plain = planes, expansion, selection
         blocks0 = list(layout.blocks0)
+        sources: list[tuple[float, int, int, int]] = []  # per tilt: views, its planes' index range
         for tilt in views.tilts:
             if views.mode == "auto":
                 record.reason = _geometry_found(selection, views)
@@ -212,7 +216,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
             with timer("views"), torch_threads(1):
                 found = view_planes(pipeline, image0, tilt, features.levels[1], layout.blocks1, config.blocks,
                                     config.ransac, detection, config.bins, config.min_plane_matches, seed, workers,
-                                    level_cache)
+                                    level_cache, fixed)
+            sources.append((tilt, found.views, len(planes.H), len(planes.H) + len(found.planes.H)))
             planes = planes.joined(found.planes, len(blocks0))
             blocks0 += found.blocks
             record.tilts.append(tilt)
@@ -225,6 +230,9 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
                 planes, expansion, selection = plain
                 record.reason = (f"no tilt gave F^theta {views.min_support} matches: the planes of the image "
                                  "alone are kept")
+        record.found = [{"tilt": tilt, "views": count, "planes": stop - start,
+                         "ftheta_matches": _matches_on_planes(selection.ftheta, start, stop)}
+                        for tilt, count, start, stop in sources]
         logger.info("Views: %s", record.reason)
     logger.info("Sec. 3.6: %s", selection.vote_reason)
     table = planes.table
@@ -269,6 +277,11 @@ def _select(planes: BlockPlanes, layout: Layout, config: SlimeConfig, workers: i
         selection = select_planes(planes.table, expansion.memberships, layout.tiles0, layout.tiles1, config.tiles,
                                   threads=workers)
     return expansion, selection
+
+
+def _matches_on_planes(sets: TileSets, start: int, stop: int) -> int:
+    """Distinct matches of ``sets`` on the planes ``start <= l < stop`` (0 when those planes are not there)."""
+    return int(sets.subset(np.flatnonzero((sets.plane >= start) & (sets.plane < stop))).union().sum())
 
 
 def _geometry_found(selection: PlaneSelection, views: ViewConfig) -> str:

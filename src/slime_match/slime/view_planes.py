@@ -17,6 +17,7 @@ from ..pipelines import BasePipeline
 from ..views import simulate_view, views_of_tilt
 from .block_planes import BlockPlanes, block_planes
 from .blocks import Block, BlockConfig, make_view_blocks
+from .fixed_descriptors import FixedDescriptors
 from .level_cache import LevelCache, feature_levels
 from .levels import LevelRequest, ScaleLevel
 
@@ -42,7 +43,8 @@ class ViewPlanes:
 
 def view_planes(pipeline: BasePipeline, image0: np.ndarray, tilt: float, levels1: list[ScaleLevel],
                 blocks1: list[Block], blocks: BlockConfig, ransac: HomographyRansacConfig, detection: str,
-                bins: int, min_matches: int, seed: int, workers: int, cache: LevelCache | None) -> ViewPlanes:
+                bins: int, min_matches: int, seed: int, workers: int, cache: LevelCache | None,
+                fixed: FixedDescriptors | None = None) -> ViewPlanes:
     """Secs. 3.1-3.3 for the views of image 0 at ``tilt`` (ASIFT's rotations) against image 1's blocks.
 
     Args:
@@ -50,6 +52,7 @@ def view_planes(pipeline: BasePipeline, image0: np.ndarray, tilt: float, levels1
         levels1, blocks1: image 1's block levels and blocks (the plain run's).
         blocks, ransac, detection, bins, min_matches, seed, workers: as for the plain block stage.
         cache: the features cache (a view's features depend on the image and the view only).
+        fixed: the plain block stage's fixed-orientation descriptors (image 1's are reused, not described again).
     """
     height, width = image0.shape[:2]
     requests = []
@@ -64,5 +67,5 @@ def view_planes(pipeline: BasePipeline, image0: np.ndarray, tilt: float, levels1
         levels0 += [replace(level, blocks=[offset + i for i in level.blocks]) for level in levels]
         all_blocks += request.blocks
     planes = block_planes(pipeline, levels0, levels1, all_blocks, blocks1, ransac, bins=bins,
-                          min_matches=min_matches, seed=seed, workers=workers)
+                          min_matches=min_matches, seed=seed, workers=workers, fixed=fixed)
     return ViewPlanes(planes, all_blocks, len(requests), features.reused)
