@@ -130,8 +130,8 @@ def _protocol_tables(summary: dict[str, Any], agg: dict[str, Any]) -> list[str]:
         )
     lines += [
         "",
-        "### Standard protocols per pair (pair mAA; the tilts of the simulated views a run added [Slime: the "
-        "matches of F^theta on their planes])",
+        ("### Standard protocols per pair (pair mAA; the tilts of the simulated views a run added [Slime: the "
+         "matches of F^theta on their planes])"),
         "",
         "| Pair | Protocol | " + " | ".join(title[m] for m in methods) + " |",
         "| --- | --- | " + " | ".join("---" for _ in methods) + " |",
