@@ -161,8 +161,9 @@ class ViewRecord:
         mode: the ``ViewConfig.mode``.
         tilts: the tilts tried, in order; views: how many views they simulated.
         reason: why the views stopped (or why none was tried).
-        found: Slime only, per tilt tried: its ``views``, the block ``planes`` they found and the matches of
-            F^theta on those planes (``ftheta_matches``; 0 when the views' planes were dropped).
+        found: Slime only, per tilt tried: its ``views``, the block ``planes`` they found, the matches of
+            F^theta on those planes (``ftheta_matches``; 0 when the views' planes were dropped) and, per view
+            angle in degrees whose planes hold some, how many (``ftheta_by_angle``).
     """
 
     mode: str

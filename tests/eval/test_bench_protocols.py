@@ -95,15 +95,16 @@ def test_the_views_a_run_added_are_kept_and_shown_per_pair(hard_run):
     path = out / "predictions" / label / f"{pair_slug(name)}.npz"
     saved = dict(np.load(path))
     views = {"mode": "auto", "tilts": [2.0, 4.0], "views": 15, "reason": "every tilt tried",
-             "found": [{"tilt": 2.0, "views": 5, "planes": 3, "ftheta_matches": 0},
-                       {"tilt": 4.0, "views": 10, "planes": 40, "ftheta_matches": 63}]}
+             "found": [{"tilt": 2.0, "views": 5, "planes": 3, "ftheta_matches": 0, "ftheta_by_angle": {}},
+                       {"tilt": 4.0, "views": 10, "planes": 40, "ftheta_matches": 63,
+                        "ftheta_by_angle": {"18": 50, "36": 20}}]}
     np.savez(path, **saved | {"decisions": np.str_(json.dumps({"views": views}))})
     assert bench.main(argv) == 0
     summary = json.loads((out / "metrics.json").read_text())
     assert summary["pairs"][0]["methods"][label]["views"] == views
     assert "views" not in summary["pairs"][1]["methods"][label]  # SIFT records none
     rows = [line for line in (out / "table.md").read_text().splitlines() if line.startswith(f"| {name} |")]
-    assert rows[-1].endswith("(views: tilt 2 [0], 4 [63]) |"), rows
+    assert rows[-1].endswith("(views: tilt 2 [0], 4 [63 at 18, 36]) |"), rows
 
 
 def test_protocol_options():

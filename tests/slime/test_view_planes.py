@@ -32,6 +32,9 @@ def test_slime_view_planes_hold_the_pairs_geometry(graf_small):  # noqa: F811
     for s in np.flatnonzero(from_view[stages["ftheta_plane"]]):
         on_view_planes[stages["ftheta_indices"][stages["ftheta_indptr"][s]:stages["ftheta_indptr"][s + 1]]] = True
     assert found[0]["ftheta_matches"] == on_view_planes.sum() > 0
+    by_angle = found[0]["ftheta_by_angle"]  # the views that found them: ASIFT's angles at tilt 2 (36 deg apart)
+    assert by_angle and set(by_angle) <= {"0", "36", "72", "108", "144"}
+    assert max(by_angle.values()) <= found[0]["ftheta_matches"] <= sum(by_angle.values())
     in_view = from_view[stages["block_matches_plane"]]
     xy0, xy1 = stages["block_matches_xy0"][in_view], stages["block_matches_xy1"][in_view]
     ok = correct_matches_homography(xy0, xy1, h)
@@ -60,6 +63,7 @@ def test_auto_views_stop_when_the_plain_run_agrees_and_leave_it_when_they_find_n
     record = unreached.summary["decisions"]["views"]
     assert record["views"] == 5 and record["tilts"] == [2.0] and "alone are kept" in record["reason"]
     assert record["found"][0]["planes"] > 0 and record["found"][0]["ftheta_matches"] == 0  # dropped
+    assert record["found"][0]["ftheta_by_angle"] == {}
     for other in (result, unreached):  # auto without views, or with views dropped = off
         np.testing.assert_array_equal(other.keypoints0, off.keypoints0)
         np.testing.assert_array_equal(other.keypoints1, off.keypoints1)

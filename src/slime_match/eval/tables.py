@@ -131,7 +131,7 @@ def _protocol_tables(summary: dict[str, Any], agg: dict[str, Any]) -> list[str]:
     lines += [
         "",
         ("### Standard protocols per pair (pair mAA; the tilts of the simulated views a run added [Slime: the "
-         "matches of F^theta on their planes])"),
+         "matches of F^theta on their planes, at the view angles in degrees that found them])"),
         "",
         "| Pair | Protocol | " + " | ".join(title[m] for m in methods) + " |",
         "| --- | --- | " + " | ".join("---" for _ in methods) + " |",
@@ -145,13 +145,19 @@ def _protocol_tables(summary: dict[str, Any], agg: dict[str, Any]) -> list[str]:
 
 
 def _views_note(views: dict[str, Any] | None) -> str:
-    """" (views: tilt 2, 4)" when a run added simulated views, else ""; Slime's runs add the F^theta matches
-    each tilt's planes hold, " (views: tilt 2 [0], 4 [63])"."""
+    """" (views: tilt 2, 4)" when a run added simulated views, else ""; Slime's runs add the F^theta matches on
+    each tilt's planes and the view angles (degrees) that found them, " (views: tilt 2 [0], 4 [63 at 18, 36])"."""
     if not views or not views.get("views"):
         return ""
-    found = {f["tilt"]: f["ftheta_matches"] for f in views.get("found", [])}
-    return " (views: tilt " + ", ".join(f"{t:g}" + (f" [{found[t]}]" if t in found else "")
-                                        for t in views["tilts"]) + ")"
+    found = {f["tilt"]: f for f in views.get("found", [])}
+
+    def tilt(t: float) -> str:
+        if t not in found:
+            return f"{t:g}"
+        angles = ", ".join(found[t].get("ftheta_by_angle", {}))
+        return f"{t:g} [{found[t]['ftheta_matches']}" + (f" at {angles}" if angles else "") + "]"
+
+    return " (views: tilt " + ", ".join(tilt(t) for t in views["tilts"]) + ")"
 
 
 def csv_table(summary: dict[str, Any], agg: dict[str, Any]) -> str:

@@ -231,7 +231,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
                 record.reason = (f"no tilt gave F^theta {views.min_support} matches: the planes of the image "
                                  "alone are kept")
         record.found = [{"tilt": tilt, "views": count, "planes": stop - start,
-                         "ftheta_matches": _matches_on_planes(selection.ftheta, start, stop)}
+                         **_views_in_ftheta(selection.ftheta, planes.level_matches.pairs[:, 0], blocks0, start, stop)}
                         for tilt, count, start, stop in sources]
         logger.info("Views: %s", record.reason)
     logger.info("Sec. 3.6: %s", selection.vote_reason)
@@ -279,9 +279,14 @@ def _select(planes: BlockPlanes, layout: Layout, config: SlimeConfig, workers: i
     return expansion, selection
 
 
-def _matches_on_planes(sets: TileSets, start: int, stop: int) -> int:
-    """Distinct matches of ``sets`` on the planes ``start <= l < stop`` (0 when those planes are not there)."""
-    return int(sets.subset(np.flatnonzero((sets.plane >= start) & (sets.plane < stop))).union().sum())
+def _views_in_ftheta(ftheta: TileSets, block0_of_plane: np.ndarray, blocks0: list[Block], start: int, stop: int
+                     ) -> dict:
+    """The distinct F^theta matches on the planes ``start <= l < stop`` (one tilt's views; none when those planes
+    were dropped): ``ftheta_matches`` in all, ``ftheta_by_angle`` per view angle (degrees) that holds some."""
+    ours = np.flatnonzero((ftheta.plane >= start) & (ftheta.plane < stop))
+    angles = np.array([blocks0[block0_of_plane[plane]].view.angle for plane in ftheta.plane[ours]])
+    by_angle = {f"{angle:g}": int(ftheta.subset(ours[angles == angle]).union().sum()) for angle in np.unique(angles)}
+    return {"ftheta_matches": int(ftheta.subset(ours).union().sum()), "ftheta_by_angle": by_angle}
 
 
 def _geometry_found(selection: PlaneSelection, views: ViewConfig) -> str:
