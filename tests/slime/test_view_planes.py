@@ -1,6 +1,7 @@
 """Simulated views end to end on a real tilted pair (graf 1 -> 3, exact GT): Slime's view planes map back
 to the original frame, a base pipeline alone pools its views' matches, and "auto" records why it stopped."""
 
+import cv2
 import numpy as np
 import pytest
 
@@ -35,6 +36,15 @@ def test_slime_view_planes_hold_the_pairs_geometry(graf_small):  # noqa: F811
     by_angle = found[0]["ftheta_by_angle"]  # the views that found them: ASIFT's angles at tilt 2 (36 deg apart)
     assert by_angle and set(by_angle) <= {"0", "36", "72", "108", "144"}
     assert max(by_angle.values()) <= found[0]["ftheta_matches"] <= sum(by_angle.values())
+    views = stages["planes_view"]  # each plane's image-0 block: its view and its outline in original px
+    assert np.all(views[from_view, 0] == 2.0) and np.all(views[~from_view] == [1.0, 0.0])
+    boxes = stages["blocks0"][stages["planes_pairs"][~from_view, 0]]
+    np.testing.assert_allclose(stages["planes_corners0"][~from_view],
+                               boxes[:, [0, 1, 2, 1, 2, 3, 0, 3]].reshape(-1, 4, 2), atol=1e-9)
+    for plane in np.flatnonzero(from_view):  # a view plane's matches lie in its block's outline in image 0
+        quad = stages["planes_corners0"][plane].astype(np.float32)
+        points = stages["block_matches_xy0"][stages["block_matches_plane"] == plane]
+        assert all(cv2.pointPolygonTest(quad, (float(x), float(y)), True) > -1.0 for x, y in points)
     in_view = from_view[stages["block_matches_plane"]]
     xy0, xy1 = stages["block_matches_xy0"][in_view], stages["block_matches_xy1"][in_view]
     ok = correct_matches_homography(xy0, xy1, h)

@@ -68,14 +68,19 @@ def web_run(web_images):
 
 
 def synthetic_stages(rng) -> dict[str, np.ndarray]:
-    """A stages.npz in the layout Slime writes: blocks, tiles, 3 planes, sets, tile and final matches."""
+    """A stages.npz in the layout Slime writes: blocks, tiles, 4 planes (the last one found in a simulated view
+    of image 0, whose block is not among ``blocks0``), sets, tile and final matches."""
     boxes = np.array([[0, 0, 370, 250, 0], [0, 0, 185, 125, 1], [185, 125, 370, 250, 1]], float)
     table = rng.uniform([0, 0], [369, 249], (60, 2))
+    corners = boxes[:, [0, 1, 2, 1, 2, 3, 0, 3]].reshape(3, 4, 2)
+    view_block = np.array([[40, 20], [200, 60], [180, 160], [20, 120]], float)  # turned and stretched
     return {
         "blocks0": boxes, "blocks1": boxes, "tiles0": boxes[1:], "tiles1": boxes[1:],
-        "planes_pairs": np.array([[0, 0], [1, 1], [2, 2]]), "planes_H": np.repeat(np.eye(3)[None], 3, 0),
+        "planes_pairs": np.array([[0, 0], [1, 1], [2, 2], [7, 1]]), "planes_H": np.repeat(np.eye(3)[None], 4, 0),
+        "planes_corners0": np.concatenate([corners, view_block[None]]),
+        "planes_view": np.array([[1, 0], [1, 0], [1, 0], [4, 18]], float),
         "block_matches_xy0": table, "block_matches_xy1": table - [20, 0],
-        "block_matches_plane": np.repeat(np.arange(3), 20),
+        "block_matches_plane": np.repeat(np.arange(4), 15),
         "table_xy0": table, "table_xy1": table - [20, 0],
         **{f"{name}_{key}": value for name in ("superset", "fbar", "ftheta") for key, value in
            (("indptr", np.array([0, 30, 60])), ("indices", np.arange(60)), ("plane", np.array([0, 1])),

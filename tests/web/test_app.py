@@ -283,7 +283,9 @@ def test_runs_and_their_pairs(client):
     stages = client.get("/api/runs/run/pairs/0/stages").json()
     assert list(stages["layers"]) == ["blocks", "tiles", "planes", "superset", "fbar", "ftheta", "tile_matches",
                                       "final"]
-    assert stages["layers"]["planes"]["label"][:3] == [0, 0, 0] and len(stages["layers"]["planes"]["H"]) == 3
+    planes = stages["layers"]["planes"]
+    assert planes["label"][:3] == [0, 0, 0] and len(planes["H"]) == 4 and planes["block_pairs"][3] == [7, 1]
+    assert planes["views"][3] == [4.0, 18.0] and planes["corners0"][3][1] == [200.0, 60.0]
     assert stages["layers"]["fbar"]["sets"] == 2 and stages["counts"] == {"matches": MANY}
     assert client.get("/api/runs/run/pairs/0/files/matches.npz").status_code == 200
     assert client.get("/api/runs/run/pairs/1/stages").status_code == 404

@@ -223,6 +223,18 @@ def test_twenty_thousand_matches_zoom_and_pan_smoothly(browser, server, shots):
     until(lambda: "match(es)" in browser.find_element("id", "info").text, 60, "the clicked match")
     settle(browser)
     browser.save_screenshot(str(shots / "many-matches.png"))
+    # a plane found in a simulated view: its image-0 block drawn as the view's outline, the view named
+    until(lambda: browser.find_elements("id", "layer-planes"), 60, "the stage layers")
+    browser.find_element("id", "show-matches").click()
+    browser.find_element("id", "layer-planes").click()
+    px, py = browser.execute_script("const L = slimeWeb.S.stages.layers.planes; "
+                                    "return L.xy0[L.label.indexOf(3)];")
+    pointer(browser, 0, px, py, click=False)
+    until(lambda: "simulated view of tilt 4 at 18 deg" in browser.find_element("id", "info").text, 60,
+          "the view plane's hover")
+    assert "block pair 7 / 1" in browser.find_element("id", "info").text
+    settle(browser)
+    browser.save_screenshot(str(shots / "stage-view-plane.png"))
 
 
 def test_annotate_a_planar_pair_and_save_it_for_the_bench(browser, server, shots, annotations, web_images):

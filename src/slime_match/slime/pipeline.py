@@ -204,9 +204,9 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
                               fixed=fixed)
     expansion, selection = _select(planes, layout, config, workers, timer)
     record = ViewRecord(views.mode)
+    blocks0 = list(layout.blocks0)  # and the views' blocks, when views are added
     if views.mode != "off":
         plain = planes, expansion, selection
-        blocks0 = list(layout.blocks0)
         sources: list[tuple[float, int, int, int]] = []  # per tilt: views, its planes' index range
         for tilt in views.tilts:
             if views.mode == "auto":
@@ -261,6 +261,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     stages = None
     if config.keep_stages:
         stages = {name: array for result in (layout, *results[1:]) for name, array in result.arrays().items()}
+        stages.update(_plane_blocks0(planes.level_matches.pairs[:, 0], blocks0))
     counts["views"] = record.views
     decisions = {"vote": selection.vote, "vote_reason": selection.vote_reason, "views": record.as_dict()}
     if final.dtm_frame:
@@ -302,6 +303,20 @@ def _workers(requested: int | None) -> int:
     return max(1, requested) if requested is not None else available_cpus()
 
 
+def _plane_blocks0(block0_of_plane: np.ndarray, blocks0: list[Block]) -> dict[str, np.ndarray]:
+    """Each plane's image-0 block for ``--save-stages``: ``planes_corners0`` (L, 4, 2) its core's corners in
+    original px (a simulated view's block is a turned, stretched quadrilateral there) and ``planes_view``
+    (L, 2) the tilt and angle in degrees of its view (1, 0: the image itself)."""
+    corners, views = np.zeros((len(block0_of_plane), 4, 2)), np.tile([1.0, 0.0], (len(block0_of_plane), 1))
+    for plane, w in enumerate(block0_of_plane):
+        block = blocks0[w]
+        x0, y0, x1, y1 = (np.asarray(block.core, np.float64) - 0.5).tolist()
+        corners[plane] = block.level_frame.to_original(np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]))
+        if block.view is not None:
+            views[plane] = block.view.tilt, block.view.angle
+    return {"planes_corners0": corners, "planes_view": views}
+
+
 def _boxes_original(blocks: list[Block]) -> np.ndarray:
     """(n, 5) [x0, y0, x1, y1, scale_index] of block cores in original px."""
     out = np.zeros((len(blocks), 5))
@@ -314,8 +329,8 @@ def _boxes_original(blocks: list[Block]) -> np.ndarray:
 
 def stages_to_original(stages: dict[str, np.ndarray], frame0: Frame, frame1: Frame) -> dict[str, np.ndarray]:
     """Stage arrays of images matched in working frames ``frame0``, ``frame1`` (``resize.resize_image``), in
-    original-image pixels: points, block and tile boxes and plane homographies (orientations stay as measured
-    when matching)."""
+    original-image pixels: points, block and tile boxes, the planes' image-0 block corners and homographies
+    (orientations stay as measured when matching)."""
     out = dict(stages)
     for image, frame in ((0, frame0), (1, frame1)):
         for key, value in stages.items():
@@ -326,4 +341,6 @@ def stages_to_original(stages: dict[str, np.ndarray], frame0: Frame, frame1: Fra
             boxes[:, 0:2], boxes[:, 2:4] = frame.to_original(boxes[:, 0:2]), frame.to_original(boxes[:, 2:4])
             out[key] = boxes
     out["planes_H"] = homographies_to_original(stages["planes_H"], frame0, frame1)
+    corners = stages["planes_corners0"]
+    out["planes_corners0"] = frame0.to_original(corners.reshape(-1, 2)).reshape(corners.shape)
     return out

@@ -71,7 +71,8 @@ def _sets(data: dict[str, np.ndarray], name: str) -> dict[str, Any]:
 def stages_payload(folder: Path) -> dict[str, Any]:
     """Slime's stages of a pair folder (``stages.npz``, with the counts and seconds of ``summary.json``) as
     layers: boxes (blocks, tiles) or labelled matches (the others); ``planes`` also holds each plane's
-    homography and block pair, for the viewer's hover."""
+    homography and block pair, and where the stages have them its image-0 block's corners and the (tilt,
+    angle) of the simulated view that block belongs to, for the viewer's hover."""
     data = load_npz(folder / "stages.npz", "stages file", ("blocks0", "blocks1", "tiles0", "tiles1"),
                     hint="; it is written by a Slime match with stages kept")
     layers: dict[str, Any] = {}
@@ -82,6 +83,9 @@ def stages_payload(folder: Path) -> dict[str, Any]:
                             "label": np.asarray(data["block_matches_plane"]).astype(int).tolist(),
                             "H": np.asarray(data["planes_H"], np.float64).tolist(),
                             "block_pairs": np.asarray(data["planes_pairs"]).astype(int).tolist()}
+        if "planes_corners0" in data and "planes_view" in data:  # image 0's block: its outline, its view
+            layers["planes"]["corners0"] = np.round(np.asarray(data["planes_corners0"], np.float64), 2).tolist()
+            layers["planes"]["views"] = np.asarray(data["planes_view"], np.float64).tolist()
     for name in ("superset", "fbar", "ftheta"):
         if f"{name}_indptr" in data and "table_xy0" in data:
             layers[name] = _sets(data, name)

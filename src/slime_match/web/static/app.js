@@ -295,6 +295,21 @@
     });
   }
 
+  function paintPolygon(ctx, v, i, corners, color, width = 3) {
+    const vi = v.views[i], left = v.paneLeft(i);
+    v.inPane(i, () => {
+      ctx.lineWidth = width;
+      ctx.strokeStyle = color;
+      ctx.beginPath();
+      corners.forEach(([x, y], k) => {
+        const sx = left + x * vi.s + vi.tx, sy = y * vi.s + vi.ty;
+        if (k === 0) ctx.moveTo(sx, sy); else ctx.lineTo(sx, sy);
+      });
+      ctx.closePath();
+      ctx.stroke();
+    });
+  }
+
   // the segment of the line a x + b y + c = 0 inside a w x h image (pixel centres at integers: its edges are
   // at -0.5 and w - 0.5)
   function clipLine(l, w, h) {
@@ -393,13 +408,13 @@
         paintPairs(ctx, v, layer.xy0, layer.xy1, () => "#d4d4d8", { noLines: true, size: 2 });
         paintPairs(ctx, v, ks.map((k) => layer.xy0[k]), ks.map((k) => layer.xy1[k]),
           () => PALETTE[p % PALETTE.length], { size: 5, lineWidth: 1.5, alpha: 0.9, all: true });
-        // the block pair of a plane, the tile pair of a set
+        // the block pair of a plane (image 0's block as its outline: a simulated view's is turned and
+        // stretched), the tile pair of a set
         const pair = name === "planes" ? layer.block_pairs[p] : (layer.set_tiles || [])[p];
         const boxes = name === "planes" ? L.blocks : L.tiles;
-        if (pair && boxes) {
-          paintBoxes(ctx, v, 0, [boxes.boxes0[pair[0]]], () => "#fef08a", 3);
-          paintBoxes(ctx, v, 1, [boxes.boxes1[pair[1]]], () => "#fef08a", 3);
-        }
+        if (name === "planes" && layer.corners0) paintPolygon(ctx, v, 0, layer.corners0[p], "#fef08a");
+        else if (pair && boxes && boxes.boxes0[pair[0]]) paintBoxes(ctx, v, 0, [boxes.boxes0[pair[0]]], () => "#fef08a", 3);
+        if (pair && boxes && boxes.boxes1[pair[1]]) paintBoxes(ctx, v, 1, [boxes.boxes1[pair[1]]], () => "#fef08a", 3);
       } else if (layer.label) {
         paintPairs(ctx, v, layer.xy0, layer.xy1, (k) => PALETTE[layer.label[k] % PALETTE.length]);
       } else {
@@ -703,7 +718,9 @@
         const plane = name === "planes" ? label : (layer.set_plane || [])[label];
         const H = L.planes && plane !== undefined ? L.planes.H[plane] : null;
         const matrix = H ? H.map((r) => r.map((v) => v.toPrecision(5).padStart(12)).join(" ")).join("\n") : "";
+        const view = name === "planes" && layer.views ? layer.views[label] : null;
         const where = name === "planes" ? `block pair ${layer.block_pairs[label].join(" / ")}`
+          + (view && view[0] > 1 ? ` (image 0's block in its simulated view of tilt ${+view[0].toFixed(2)} at ${+view[1].toFixed(1)} deg)` : "")
           : `set ${label} of ${name}, tile pair ${(layer.set_tiles || [])[label]}`;
         renderInfo(`plane ${plane}: ${count} matches, ${where}` + (H ? `, H (image 0 -> 1):\n${matrix}` : ""));
       }
