@@ -310,8 +310,7 @@ def _plane_blocks0(block0_of_plane: np.ndarray, blocks0: list[Block]) -> dict[st
     corners, views = np.zeros((len(block0_of_plane), 4, 2)), np.tile([1.0, 0.0], (len(block0_of_plane), 1))
     for plane, w in enumerate(block0_of_plane):
         block = blocks0[w]
-        x0, y0, x1, y1 = (np.asarray(block.core, np.float64) - 0.5).tolist()
-        corners[plane] = block.level_frame.to_original(np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]))
+        corners[plane] = _core_corners(block)
         if block.view is not None:
             views[plane] = block.view.tilt, block.view.angle
     return {"planes_corners0": corners, "planes_view": views}
@@ -321,10 +320,16 @@ def _boxes_original(blocks: list[Block]) -> np.ndarray:
     """(n, 5) [x0, y0, x1, y1, scale_index] of block cores in original px."""
     out = np.zeros((len(blocks), 5))
     for i, b in enumerate(blocks):
-        lo = b.level_frame.to_original(np.array([[b.core[0] - 0.5, b.core[1] - 0.5]]))[0]
-        hi = b.level_frame.to_original(np.array([[b.core[2] - 0.5, b.core[3] - 0.5]]))[0]
-        out[i] = [*lo, *hi, b.scale_index]
+        corners = _core_corners(b)
+        out[i] = [*corners[0], *corners[2], b.scale_index]
     return out
+
+
+def _core_corners(block: Block) -> np.ndarray:
+    """(4, 2) the corners of a block's core in original px: top-left, top-right, bottom-right, bottom-left of
+    its level (pixel edges, half a pixel outside the centres)."""
+    x0, y0, x1, y1 = (np.asarray(block.core, np.float64) - 0.5).tolist()
+    return block.level_frame.to_original(np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]))
 
 
 def stages_to_original(stages: dict[str, np.ndarray], frame0: Frame, frame1: Frame) -> dict[str, np.ndarray]:
