@@ -10,6 +10,10 @@ DEVICES = ("auto", "cpu", "cuda")
 # the base pipelines built into the package, in their registration order (``pipelines.registry``); each is also
 # a method that runs that pipeline alone. Pipelines registered at run time are known to the Python API only.
 BUILTIN_BASES = ("hz+", "rootsift", "keynet")
+# the learned bases (kornia's ALIKED, DISK, XFeat with LightGlue or mutual nearest neighbours), registered after
+# them; they run alone only (``pipelines.learned``)
+LEARNED_BASES = ("aliked-lg", "aliked-nn", "disk-lg", "disk-nn", "xfeat-lg", "xfeat-nn")
+ALIKED_MODELS = ("n16", "n16rot", "n32")
 
 SHAPE_METHODS = ("affnet", "baumberg")
 ORIENTATION_METHODS = ("orinet", "gradient", "upright", "fixed")

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from ._runtime.options import check_choice, check_integer, config_from_dict, set_option
-from .choices import DEVICES, RANSAC_CHOICES
+from .choices import DEVICES, LEARNED_BASES, RANSAC_CHOICES
 from .errors import ConfigError
 from .io import MIN_IMAGE_SIDE
 from .pipelines import PIPELINES, BaseConfig, base_names, unimplemented
@@ -27,8 +27,11 @@ from .views import ViewConfig
 
 # working-size limits (px) of "auto": Slime upsamples images whose shorter side is under 480 px (its 256 px
 # tiles and the Sec. 3.6 vote need several tiles per image) and shrinks those whose longer side is over 1200
-# px (the paper's image sizes; tiles and time grow with the image); a base pipeline alone runs at full size
-AUTO_SIDES: dict[str, tuple[int | None, int | None]] = {"slime": (480, 1200)}
+# px (the paper's image sizes; tiles and time grow with the image); a handcrafted base pipeline alone runs at
+# full size; a learned base alone shrinks them to 1024 px on the longer side (where its networks were trained and
+# measured)
+AUTO_SIDES: dict[str, tuple[int | None, int | None]] = {"slime": (480, 1200),
+                                                        **{name: (None, 1024) for name in LEARNED_BASES}}
 SHORT_NAMES = {"scales": "slime.blocks.scales", "same_homography": "slime.tiles.same_homography",
                "views": "views.mode"}
 
@@ -43,8 +46,9 @@ class MatchConfig:
     """Everything that defines a matching run.
 
     Attributes:
-        method: "slime" (Slime on top of ``base``), or a base pipeline alone: "hz+" / "rootsift" / "keynet" (or
-            one added with ``slime_match.pipelines.register_pipeline``).
+        method: "slime" (Slime on top of ``base``), or a base pipeline alone: "hz+" / "rootsift" / "keynet", a
+            learned one ("aliked-lg", "disk-nn"...: ``choices.LEARNED_BASES``), or one added with
+            ``slime_match.pipelines.register_pipeline``.
         base: the base pipeline options (for Slime: the pipeline run on blocks and tiles; ``base.name`` may
             name a pipeline added with ``slime_match.pipelines.register_pipeline``).
         slime: Slime's parameters (the paper's defaults).
@@ -58,8 +62,8 @@ class MatchConfig:
             pipeline alone); 0, "none" or None: off (``make_config`` skips None values: pass 0 there).
         max_side: images whose longer side is larger are shrunk to this many px (area interpolation) before
             matching; it wins over ``min_side`` for an elongated image; "auto": the method's default (1200 for
-            Slime, off for a base pipeline alone); 0, "none" or None: off. The two images share one factor when one
-            meets both images' limits, else each gets its own (``resize.pair_factors``); the matches are mapped
+            Slime, 1024 for a learned base alone, off for the other base pipelines alone); 0, "none" or None:
+            off. The two images share one factor when one meets both images' limits, else each gets its own (``resize.pair_factors``); the matches are mapped
             back to original-image pixels.
         views: simulated views of image 0 for extreme viewpoints (ASIFT tilts, :class:`~slime_match.views.
             ViewConfig`): "auto" (default) only when the plain run finds too little consistent geometry,
@@ -164,6 +168,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     "rootsift-upright": {"method": "rootsift", "upright": True},
     "keynet": {"method": "keynet"},
     "keynet-upright": {"method": "keynet", "upright": True},
+    # the learned bases alone, with LightGlue's usual 4096 keypoints (working size: AUTO_SIDES)
+    **{name: {"method": name, "max_keypoints": 4096} for name in LEARNED_BASES},
 }
 
 

@@ -8,6 +8,7 @@ import argparse
 from ..choices import (
     BUILTIN_BASES,
     DESCRIPTOR_CHOICES,
+    LEARNED_BASES,
     DETECTIONS,
     DEVICES,
     ORIENTATION_CHOICES,
@@ -25,8 +26,9 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
     everyday = parser.add_argument_group("matching")
     internals = parser.add_argument_group(
         "Slime and base pipeline internals", "the paper's parameters and their variants; any other by --set")
-    everyday.add_argument("--method", default=None, choices=("slime", *BUILTIN_BASES),
-                          help="Slime (default) or a base pipeline alone")
+    everyday.add_argument("--method", default=None, choices=("slime", *BUILTIN_BASES, *LEARNED_BASES),
+                          help="Slime (default) or a base pipeline alone (the learned ones: ALIKED, DISK or XFeat "
+                               "with LightGlue (-lg) or mutual nearest neighbours (-nn))")
     internals.add_argument("--base", default=None, choices=BUILTIN_BASES,
                            help="base pipeline run inside Slime (default hz+)")
     everyday.add_argument("--descriptor", default=None, choices=DESCRIPTOR_CHOICES,
@@ -56,8 +58,8 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
                                "pipeline alone); matches come back in original pixels")
     everyday.add_argument("--max-side", type=parse_side, default=None, metavar="PX|none",
                           help="shrink images whose longer side is larger to this many px before matching "
-                               "(default auto: 1200 for Slime, as the paper's images; none for a base pipeline "
-                               "alone); wins over --min-side; matches come back in original pixels")
+                               "(default auto: 1200 for Slime, as the paper's images; 1024 for a learned base "
+                               "alone; none for the other base pipelines alone); wins over --min-side; matches come back in original pixels")
     internals.add_argument("--magnification", type=float, default=None,
                            help="patch size over the detected region (default 6 over HarrisZ+ ellipses, 1 over "
                                 "Key.Net frames); smaller patches give a weaker base")

@@ -1,4 +1,5 @@
-"""Nearest-neighbour descriptor matching: NN ratio, mutual NN and FGINN, on blocked L2 distances.
+"""Nearest-neighbour descriptor matching: NN ratio, mutual NN (with or without a ratio test) and FGINN, on
+blocked L2 distances.
 
 The N x M distance matrix is never held in memory: rows are processed in blocks of ``block_size`` and
 only the k smallest distances per row and per column are kept. The same primitives serve Blob matching.
@@ -181,6 +182,31 @@ def match_mutual_nn(desc0: torch.Tensor, desc1: torch.Tensor, block_size: int = 
     rows = torch.arange(desc0.shape[0], device=idx.device)
     keep = torch.nonzero(col_idx[idx[:, 0], 0] == rows).flatten()
     return _to_matches(keep, idx[keep, 0], dist[keep, 0])
+
+
+def match_mutual_nn_ratio(desc0: torch.Tensor, desc1: torch.Tensor, ratio: float = 0.9,
+                          block_size: int = DEFAULT_BLOCK) -> Matches:
+    """Mutual nearest neighbours that also pass Lowe's ratio test.
+
+    Args:
+        desc0: (N, D), desc1: (M, D) descriptors.
+        ratio: keep i -> nn(i) when d1 / d2 < ratio (d2 = inf when M < 2); 1 keeps every mutual pair.
+
+    Returns:
+        Matches with score d1 / d2, ascending.
+    """
+    if not 0 < ratio <= 1:
+        raise ConfigError(f"ratio must be in (0, 1], got {ratio}")
+    if desc0.shape[0] == 0 or desc1.shape[0] == 0:
+        return Matches.empty()
+    dist, idx, _, col_idx = knn(desc0, desc1, 2, 1, block_size)
+    second = dist[:, 1] if dist.shape[1] > 1 else torch.full_like(dist[:, 0], float("inf"))
+    score = _ratio(dist[:, 0], second)
+    ok = col_idx[idx[:, 0], 0] == torch.arange(desc0.shape[0], device=idx.device)
+    if ratio < 1:
+        ok &= score < ratio
+    keep = torch.nonzero(ok).flatten()
+    return _to_matches(keep, idx[keep, 0], score[keep])
 
 
 def match_fginn(desc0: torch.Tensor, desc1: torch.Tensor, xy0: torch.Tensor, xy1: torch.Tensor,

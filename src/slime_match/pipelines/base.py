@@ -27,6 +27,7 @@ Slime also calls these hooks; each has a default built on the part above where o
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -36,7 +37,7 @@ import torch
 
 from .._runtime.compiled import warm_up
 from .._runtime.options import check_choice, check_integer
-from ..choices import DESCRIPTOR_CHOICES, ORIENTATION_CHOICES, SHAPE_METHODS
+from ..choices import ALIKED_MODELS, DESCRIPTOR_CHOICES, ORIENTATION_CHOICES, SHAPE_METHODS
 from ..errors import ConfigError
 from ..matching.blob import BlobConfig
 from ..matching.dtm import DTMConfig
@@ -53,7 +54,9 @@ class BaseConfig:
         name: the registered name of the pipeline: "hz+" (HarrisZ+ + AffNet + OriNet + descriptor + Blob
             matching + DTM), "rootsift" (OpenCV DoG + RootSIFT + FGINN, the paper's handcrafted baseline),
             "keynet" (Key.Net + AffNet + OriNet + HardNet/TFeat + AdaLAM, kornia's detector, networks and
-            matcher), or one added with ``register_pipeline``.
+            matcher), a learned one ("aliked-lg", "aliked-nn", "disk-lg", "disk-nn", "xfeat-lg", "xfeat-nn":
+            kornia's ALIKED, DISK or XFeat with LightGlue or mutual nearest neighbours), or one added with
+            ``register_pipeline``.
         descriptor: Hz+ descriptor: "auto" | "hardnet" | "hardtfeat" | "tfeat" | "rootsift" (Key.Net: a
             learned one); "auto" takes the best available (HardNet, HardTFeat, TFeat, then RootSIFT).
         shape: Hz+ affine shape: "affnet" | "baumberg" (Key.Net: "affnet").
@@ -64,6 +67,10 @@ class BaseConfig:
             HarrisZ+'s ellipses, 1 over Key.Net's frames, which already span 6 detection scales).
         weights_dir: a folder holding the model weights (else kornia's torch-hub cache, ``TORCH_HOME``).
         fginn_ratio, fginn_radius: FGINN ratio and spatial radius (px) for the RootSIFT pipeline.
+        aliked_model: the ALIKED weights of the aliked-* pipelines: "n16" | "n16rot" (trained for rotations) |
+            "n32".
+        nn_ratio: Lowe's ratio of the mutual nearest-neighbour matcher of the *-nn learned pipelines (1: mutual
+            nearest neighbours alone).
         use_dtm: run DTM after Blob matching (Hz+); False only for inspection.
     """
 
@@ -77,6 +84,8 @@ class BaseConfig:
     weights_dir: str | None = None
     fginn_ratio: float = 0.8
     fginn_radius: float = 10.0
+    aliked_model: str = "n16"
+    nn_ratio: float = 0.9
     use_dtm: bool = True
     blob: BlobConfig = field(default_factory=BlobConfig)
     dtm: DTMConfig = field(default_factory=DTMConfig)
@@ -91,6 +100,10 @@ class BaseConfig:
         check_choice("shape", self.shape, SHAPE_METHODS)
         check_choice("orientation", self.orientation, ORIENTATION_CHOICES)
         check_integer("max_keypoints", self.max_keypoints, 1)
+        check_choice("aliked_model", self.aliked_model, ALIKED_MODELS)
+        if not (isinstance(self.nn_ratio, numbers.Real) and not isinstance(self.nn_ratio, bool)
+                and 0 < self.nn_ratio <= 1):
+            raise ConfigError(f"nn_ratio must be in (0, 1], got {self.nn_ratio!r}")
         return self
 
 

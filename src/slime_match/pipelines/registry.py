@@ -1,4 +1,4 @@
-"""Base pipelines by name: the built-in Hz+, RootSIFT and Key.Net, and those a user registers.
+"""Base pipelines by name: the built-in Hz+, RootSIFT, Key.Net and learned ones, and those a user registers.
 
 A registered pipeline is what ``BaseConfig.name`` (``make_config(base=...)``, ``--base``) selects:
 
@@ -14,11 +14,12 @@ import dataclasses
 
 import torch
 
-from ..choices import BUILTIN_BASES
+from ..choices import BUILTIN_BASES, LEARNED_BASES
 from ..errors import ConfigError
 from .base import BaseConfig, BasePipeline, unimplemented
 from .hzplus import HzPlusPipeline
 from .keynet import KeyNetPipeline
+from .learned import learned_pipeline_class
 from .rootsift import RootSiftPipeline
 
 PIPELINES: dict[str, type[BasePipeline]] = {}  # name -> class, in registration order
@@ -64,5 +65,7 @@ def make_base_pipeline(config: BaseConfig, device: torch.device | str = "cpu") -
 
 for _name, _cls in zip(BUILTIN_BASES, (HzPlusPipeline, RootSiftPipeline, KeyNetPipeline), strict=True):
     register_pipeline(_name, _cls)
+for _name in LEARNED_BASES:
+    register_pipeline(_name, learned_pipeline_class(_name))
 
 BASE_NAMES = base_names()  # the built-in pipelines, which are also methods that run one base alone

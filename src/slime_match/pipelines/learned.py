@@ -1,0 +1,145 @@
+"""Learned bases through kornia: ALIKED, DISK or XFeat keypoints and descriptors, matched by LightGlue
+(LighterGlue for XFeat) or by mutual nearest neighbours with a ratio test.
+
+Each pair of extractor and matcher is a base pipeline of its own, registered as ``<extractor>-lg`` or
+``<extractor>-nn`` (:data:`LEARNED_BASES`). The networks and their weights are kornia's
+(:mod:`slime_match.features.learned_weights`); the images they see are the matcher's working images (the
+presets shrink them to 1024 px on the longer side), and the keypoints come back in the pixels of those images
+(the centre of the top-left pixel is (0, 0)). These pipelines run alone; Slime needs ``describe_fixed``, which
+they do not have.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..choices import LEARNED_BASES as LEARNED_NAMES
+from ..features import learned_weights
+from ..geometry.frames import Frame
+from ..matching.nn import match_mutual_nn_ratio
+from ..types import Features, Matches
+from .base import BaseConfig, BasePipeline, _empty_features, _filtered
+
+# registered name -> (extractor, matcher)
+LEARNED_BASES: dict[str, tuple[str, str]] = {
+    name: (name.split("-")[0], {"lg": "lightglue", "nn": "mutual-nn"}[name.split("-")[1]]) for name in LEARNED_NAMES
+}
+DESCRIPTOR_DIMS = {"aliked": 128, "disk": 128, "xfeat": 64}
+GLUE_NAMES = {"aliked": "LightGlue", "disk": "LightGlue", "xfeat": "LighterGlue"}
+
+
+def unit_frames(xy: torch.Tensor) -> torch.Tensor:
+    """(N, 2, 3) upright LAFs of unit scale centred on the (N, 2) keypoints: these extractors give positions only."""
+    laf = torch.zeros(len(xy), 2, 3, dtype=torch.float32, device=xy.device)
+    laf[:, 0, 0] = laf[:, 1, 1] = 1.0
+    laf[:, :, 2] = xy.float()
+    return laf
+
+
+class LearnedPipeline(BasePipeline):
+    """A learned extractor (``extractor``: "aliked", "disk" or "xfeat") and a matcher (``matcher``: "lightglue"
+    or "mutual-nn"), both kornia's networks on the working images.
+
+    Extractors: ALIKED (``aliked_model`` n16, n16rot or n32; the score maxima above kornia's threshold 0.2, at
+    most ``max_keypoints``), DISK ("depth" weights, at most ``max_keypoints``), XFeat (its ``max_keypoints``
+    strongest detections; XFeat resizes the image to multiples of 32 inside, which the keypoints are mapped back
+    from exactly). Matchers: LightGlue with the extractor's weights (LighterGlue for XFeat), whose scores are
+    ``1 - matching score``; or mutual nearest neighbours with Lowe's ratio test (``nn_ratio``), whose scores are
+    the distance ratios. Both: lower is better. A ``candidate_filter`` applies to the matcher's output.
+
+    Raises:
+        WeightsNotFoundError: a network's weights are neither in kornia's cache nor downloadable (at build).
+    """
+
+    extractor: str = ""
+    matcher: str = ""
+    slime_global_dtm = False
+
+    def __init__(self, config: BaseConfig, device: torch.device) -> None:
+        self.config, self.device = config, device
+        if self.extractor == "aliked":
+            self.network = learned_weights.aliked(config.aliked_model, config.max_keypoints, device)
+        elif self.extractor == "disk":
+            self.network = learned_weights.disk(device)
+        else:
+            self.network = learned_weights.xfeat(config.max_keypoints, device)
+        self.glue = learned_weights.lightglue(self.extractor, device) if self.matcher == "lightglue" else None
+
+    @torch.inference_mode()
+    def extract(self, image: np.ndarray) -> Features:
+        """Keypoints (as unit upright LAFs), L2-normalised descriptors and detection scores of an (H, W, 3) image."""
+        rgb = torch.from_numpy(np.clip(np.ascontiguousarray(image, dtype=np.float32), 0.0, 1.0))
+        rgb = rgb.permute(2, 0, 1)[None].to(self.device)
+        if self.extractor == "aliked":
+            found = self.network(rgb)[0]
+            xy, descriptors, scores = found.keypoints, found.descriptors, found.keypoint_scores
+        elif self.extractor == "disk":
+            found = self.network(rgb, n=self.config.max_keypoints, pad_if_not_divisible=True)[0]
+            xy, descriptors, scores = found.keypoints, found.descriptors, found.detection_scores
+        else:
+            found = self.network.detectAndCompute(rgb)[0]
+            xy, descriptors, scores = self._xfeat_pixels(found["keypoints"], image.shape[:2]), \
+                found["descriptors"], found["scores"]
+        if len(xy) == 0:
+            return _empty_features(DESCRIPTOR_DIMS[self.extractor], self.device)
+        laf = unit_frames(xy)
+        return Features(laf, descriptors.float(), scores.float().reshape(-1), laf)
+
+    def _xfeat_pixels(self, keypoints: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
+        """XFeat's (N, 2) keypoints in the pixels of an (H, W) image. XFeat detects on the image resized to
+        multiples of 32 (bilinear, pixel edges aligned) and scales its keypoints by the size ratio only; the
+        exact map of that resize adds ``(ratio - 1) / 2`` per axis."""
+        height, width = size
+        inner = (max(32, width // 32 * 32), max(32, height // 32 * 32))
+        ratio = torch.tensor([width / inner[0], height / inner[1]], device=keypoints.device)
+        frame = Frame.of_sizes(inner, (width, height))
+        xy = frame.to_original((keypoints / ratio).double().cpu().numpy())
+        return torch.from_numpy(xy).float().to(keypoints.device)
+
+    @torch.inference_mode()
+    def match(self, features0, features1, size0, size1, candidate_filter=None) -> Matches:
+        if len(features0) < 2 or len(features1) < 2:
+            return Matches.empty()
+        if self.glue is None:
+            matches = match_mutual_nn_ratio(features0.descriptors, features1.descriptors, self.config.nn_ratio)
+        else:
+
+            def side(features: Features, size: tuple[int, int]) -> dict[str, torch.Tensor]:
+                wh = torch.tensor([[size[1], size[0]]], dtype=torch.float32, device=self.device)
+                return {"keypoints": features.xy[None], "descriptors": features.descriptors[None], "image_size": wh}
+
+            out = self.glue({"image0": side(features0, size0), "image1": side(features1, size1)})
+            idx = out["matches"][0].cpu().numpy().reshape(-1, 2)
+            scores = 1.0 - out["scores"][0].double().cpu().numpy().reshape(-1)
+            order = np.argsort(scores, kind="stable")
+            matches = Matches(idx[order, 0], idx[order, 1], scores[order])
+        return _filtered(matches, features0, features1, candidate_filter)
+
+    def kernel_groups(self) -> tuple[str, ...]:
+        # mutual NN runs the nearest-neighbour loops of Blob matching on the CPU
+        return ("blob",) if self.matcher == "mutual-nn" and self.device.type == "cpu" else ()
+
+    def describe(self) -> dict[str, Any]:
+        summary: dict[str, Any] = {"base": self.name, "detector": self.extractor, "descriptor": self.extractor,
+                                   "max_keypoints": self.config.max_keypoints}
+        if self.extractor == "aliked":
+            summary["aliked_model"] = self.config.aliked_model
+        if self.glue is None:
+            summary.update(matcher="mutual-nn", nn_ratio=self.config.nn_ratio)
+        else:
+            summary["matcher"] = GLUE_NAMES[self.extractor].lower()
+        return summary
+
+
+def learned_pipeline_class(name: str) -> type[LearnedPipeline]:
+    """The pipeline class registered as ``name`` (a key of :data:`LEARNED_BASES`)."""
+    extractor, matcher = LEARNED_BASES[name]
+    options = {"max_keypoints"} | ({"aliked_model"} if extractor == "aliked" else set()) \
+        | ({"nn_ratio"} if matcher == "mutual-nn" else set())
+    return type(f"{extractor.upper()}{'LightGlue' if matcher == 'lightglue' else 'MutualNN'}Pipeline",
+                (LearnedPipeline,), {"name": name, "extractor": extractor, "matcher": matcher,
+                                     "options": frozenset(options), "__module__": __name__,
+                                     "__doc__": f"{extractor} + {matcher} (see :class:`LearnedPipeline`)."})
