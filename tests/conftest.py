@@ -3,8 +3,13 @@ weights are absent.
 
 A test that needs network weights (AffNet, OriNet, TFeat, HardTFeat, HardNet, Key.Net) skips, naming them,
 when they are neither cached nor downloadable: it calls :func:`require_weights`, and any other test or fixture
-that stops on a :class:`~slime_match.errors.WeightsNotFoundError` is turned into the same skip. With
-``SLIME_REQUIRE_WEIGHTS=1`` (CI sets it) such a skip is a failure instead, so CI runs every test.
+that stops on a :class:`~slime_match.errors.WeightsNotFoundError` is turned into the same skip. A test of the
+learned bases (ALIKED, DISK, XFeat, LightGlue) calls :func:`require_learned_weights`, which skips unless they are
+cached. With ``SLIME_REQUIRE_WEIGHTS=1`` (CI sets it) such a skip is a failure instead, so CI runs every test.
+
+The torch-hub cache is ``TORCH_HOME`` when set; else ``.cache/torch`` in the repository when
+``scripts/fetch_learned_weights.py`` built it (learned weights, and links to the shared weights), else the shared
+weights folder beside the repository.
 """
 
 import os
@@ -19,6 +24,7 @@ from skimage.data import stereo_motorcycle
 
 from slime_match.cli import main
 from slime_match.errors import WeightsNotFoundError
+from slime_match.features.learned_weights import cache_path
 from slime_match.features.weights import is_cached, load_state_dict
 from slime_match.io import save_json, save_npz
 from slime_match.runs.export import PairMatches
@@ -27,8 +33,11 @@ ROOT = Path(__file__).resolve().parents[1]
 SHARED = (ROOT.parent / "shared").resolve()
 DATA = SHARED / "data"
 WEIGHTS = SHARED / "weights"
+LEARNED_CACHE = ROOT / ".cache" / "torch"  # what scripts/fetch_learned_weights.py builds for the tests
 
-if WEIGHTS.is_dir():
+if (LEARNED_CACHE / "hub" / "checkpoints").is_dir():
+    os.environ.setdefault("TORCH_HOME", str(LEARNED_CACHE))
+elif WEIGHTS.is_dir():
     os.environ.setdefault("TORCH_HOME", str(WEIGHTS))
 
 REQUIRE_WEIGHTS = os.environ.get("SLIME_REQUIRE_WEIGHTS", "").strip() not in ("", "0")
@@ -56,6 +65,16 @@ def require_weights(*names: str) -> None:
     if missing:
         weights_unavailable(f"needs the {', '.join(missing)} weights, which are not cached (TORCH_HOME="
                             f"{os.environ.get('TORCH_HOME', 'unset')}) and could not be downloaded")
+
+
+def require_learned_weights(*models: str) -> None:
+    """Skip the calling test (fail under ``SLIME_REQUIRE_WEIGHTS=1``) unless the checkpoints of every model in
+    ``models`` (keys of ``learned_weights.CACHE_FILES``: "aliked-n16", "disk", "lightglue-aliked"...) are in the
+    torch-hub cache. Nothing is downloaded: ``scripts/fetch_learned_weights.py`` fills the cache."""
+    missing = [cache_path(model) for model in models if not cache_path(model).is_file()]
+    if missing:
+        weights_unavailable(f"needs {', '.join(p.name for p in missing)} in {missing[0].parent}: run "
+                            f"python scripts/fetch_learned_weights.py {LEARNED_CACHE} --link {WEIGHTS}")
 
 
 @pytest.hookimpl(wrapper=True)

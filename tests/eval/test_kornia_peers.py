@@ -1,4 +1,4 @@
-"""kornia peers (LoFTR, DISK + LightGlue): resize geometry, options, missing weights, plumbing with random weights.
+"""kornia peer LoFTR: resize geometry, options, missing weights, plumbing with random weights.
 
 No pretrained weights are needed: the missing-weights tests use an empty hub cache with the network cut, and the
 plumbing tests hand kornia's real pretrained path random checkpoints.
@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from slime_match.errors import ConfigError, WeightsNotFoundError
-from slime_match.eval.kornia_peers import KorniaDiskLightGlue, KorniaLoFTR, fit_size, frame_of, resize_to
+from slime_match.eval.kornia_peers import KorniaLoFTR, fit_size, frame_of, resize_to
 
 H, W = 96, 128
 
@@ -90,11 +90,7 @@ def test_resize_then_map_back_agrees_with_opencv_on_a_ramp():
         (KorniaLoFTR, {"max_side": "big"}),
         (KorniaLoFTR, {"threshold": 1.5}),
         (KorniaLoFTR, {"device": "gpu-ish"}),
-        (KorniaLoFTR, {"num_features": 100}),  # DISK's option, unknown to LoFTR
-        (KorniaDiskLightGlue, {"num_features": 0}),
-        (KorniaDiskLightGlue, {"max_side": 8}),
-        (KorniaDiskLightGlue, {"weights": "outdoor"}),
-        (KorniaDiskLightGlue, {"bogus": 1}),
+        (KorniaLoFTR, {"num_features": 100}),  # not a LoFTR option
     ],
 )
 def test_bad_option_is_a_config_error(cls, options):
@@ -120,12 +116,10 @@ def offline(tmp_path, monkeypatch):
     return tmp_path / "hub" / "checkpoints"
 
 
-@pytest.mark.parametrize(
-    ("cls", "model"), [(KorniaLoFTR, "LoFTR 'outdoor'"), (KorniaDiskLightGlue, "DISK 'depth'")]
-)
-def test_missing_weights_raise_a_helpful_error(offline, cls, model):
+def test_missing_weights_raise_a_helpful_error(offline):
     image0, image1 = _pair()
-    method = cls(device="cpu")  # building the method costs nothing: the models load on the first call
+    model = "LoFTR 'outdoor'"
+    method = KorniaLoFTR(device="cpu")  # building the method costs nothing: the models load on the first call
     with pytest.raises(WeightsNotFoundError) as err:
         method(image0, image1)
     text = str(err.value)
@@ -133,18 +127,7 @@ def test_missing_weights_raise_a_helpful_error(offline, cls, model):
     assert "network cut by the test" in text  # the failed download itself, not some other error
     for alternative in ("keynet", "hz+", "rootsift", "opencv-sift"):
         assert alternative in text
-    assert not (offline / "loftr_outdoor.ckpt").exists() and not (offline / "depth-save.pth").exists()
-
-
-def test_missing_lightglue_weights_are_named_when_disk_loads(offline, monkeypatch):
-    import kornia.feature as KF
-
-    checkpoint = {"extractor": KF.DISK().state_dict()}
-    monkeypatch.setattr(
-        _module("kornia.feature.disk.disk"), "load_state_dict_from_url", lambda *a, **k: checkpoint
-    )
-    with pytest.raises(WeightsNotFoundError, match="LightGlue 'disk' weights are missing from"):
-        KorniaDiskLightGlue(device="cpu")(*_pair())
+    assert not (offline / "loftr_outdoor.ckpt").exists()
 
 
 def test_unrelated_loading_errors_are_not_disguised(offline, monkeypatch):
@@ -195,26 +178,3 @@ def test_loftr_plumbing_with_random_weights(offline, monkeypatch):
     assert (scores >= 0).all() and (scores < 1).all()
     # keypoints0 sit on LoFTR's coarse grid, 8 * cell - 0.5 in the 48 x 64 image: 16 * cell - 0.5 here
     np.testing.assert_array_equal((xy0 + 0.5) % 16, 0)
-
-
-def test_disk_lightglue_plumbing_with_random_weights(offline, monkeypatch):
-    import kornia.feature as KF
-
-    torch.manual_seed(0)
-    disk_checkpoint = {"extractor": KF.DISK().state_dict()}
-    lightglue_checkpoint = KF.LightGlue(None, input_dim=128).state_dict()
-    monkeypatch.setattr(
-        _module("kornia.feature.disk.disk"), "load_state_dict_from_url", lambda *a, **k: disk_checkpoint
-    )
-    monkeypatch.setattr(
-        _module("kornia.feature.lightglue"), "load_state_dict_from_url", lambda *a, **k: lightglue_checkpoint
-    )
-    image0, image1 = _pair()
-    # 96 x 128 -> 48 x 64 exactly, so DISK's integer keypoints k map to 2 k + 0.5
-    method = KorniaDiskLightGlue(num_features=64, max_side=64, threshold=0.0, device="cpu")
-    out = method(image0, image1)
-    _check_contract(out, (H, W), (H, W))
-    xy0, xy1, scores, _ = out
-    assert (scores >= 0).all() and (scores <= 1).all()
-    for xy in (xy0, xy1):
-        np.testing.assert_array_equal((xy - 0.5) % 2, 0)

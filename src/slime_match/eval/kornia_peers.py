@@ -1,25 +1,21 @@
-"""End-to-end learned peers for ``slime bench``: kornia's LoFTR and DISK + LightGlue.
+"""An end-to-end learned peer for ``slime bench``: kornia's LoFTR (the learned sparse bases, ALIKED, DISK and
+XFeat with LightGlue, are base pipelines: ``slime_match.pipelines.learned``).
 
-Both follow the call contract of :mod:`slime_match.eval.methods`: ``method(image0, image1) -> (xy0, xy1,
+It follows the call contract of :mod:`slime_match.eval.methods`: ``method(image0, image1) -> (xy0, xy1,
 scores, seconds)`` with (H, W, 3) float32 RGB images in [0, 1], (K, 2) float64 keypoints in pixels of the given
 images (centre of the top-left pixel = (0, 0)), (K,) float64 dissimilarities (lower is better) and the
 wall-clock seconds of the matching alone (models are built lazily on the first call and not timed).
 
-Weights: the models load kornia's pretrained checkpoints through kornia itself (``LoFTR(pretrained=...)``,
-``DISK.from_pretrained``, ``LightGlue("disk")``), i.e. from the torch-hub cache ``torch.hub.get_dir()/checkpoints``
-(follows ``TORCH_HOME``), downloading them there when the network allows it. When they are neither cached nor
-downloadable, :class:`~slime_match.errors.WeightsNotFoundError` names the model, the cache folder and the
-alternatives; there is no fallback to another model.
+Weights: LoFTR loads kornia's pretrained checkpoint through kornia itself (``LoFTR(pretrained=...)``), i.e. from
+the torch-hub cache ``torch.hub.get_dir()/checkpoints`` (follows ``TORCH_HOME``), downloading it there when the
+network allows it. When it is neither cached nor downloadable, :class:`~slime_match.errors.WeightsNotFoundError`
+names the model, the cache folder and the alternatives; there is no fallback to another model.
 
 Conventions:
     - LoFTR gets the grey image resized so that its longest side is at most ``max_side`` and both sides are
       multiples of 8; kornia documents its keypoints in a frame where pixel (x, y) has its centre at
       (x + 0.5, y + 0.5), so 0.5 is subtracted before mapping them back to the original pixels. Scores are
       ``1 - confidence`` (LoFTR's coarse dual-softmax confidence; kornia keeps only confidence > threshold).
-    - DISK gets the RGB image resized so that its longest side is at most ``max_side`` (zero-padded to multiples
-      of 16 by kornia, no keypoint in the padding); its keypoints are integer pixels of the resized image.
-      LightGlue matches them; scores are ``1 - LightGlue's matching score`` (kornia's ``scores``, in [0, 1], only
-      matches above ``threshold`` are returned).
     - Resizing uses OpenCV (area when shrinking), whose pixel grid maps pixel centre ``x`` of the resized image to
       ``(x + 0.5) * W / w - 0.5`` of the original; :func:`frame_of` maps that per axis.
 """
@@ -27,13 +23,7 @@ Conventions:
 from __future__ import annotations
 
 import copy
-import http.client
-import logging
 import time
-import urllib.error
-import warnings
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -41,27 +31,16 @@ import cv2
 import numpy as np
 import torch
 
-from slime_match.errors import ConfigError, WeightsNotFoundError
-from slime_match.eval.method_base import (
-    MethodOutput,
-    dataclass_from,
-    empty_output,
-    synchronize,
-    to_grey,
-)
+from slime_match.errors import ConfigError
+from slime_match.eval.method_base import MethodOutput, dataclass_from, synchronize, to_grey
+from slime_match.features.learned_weights import pretrained
 from slime_match.geometry.frames import Frame
 from slime_match.matcher import resolve_device
 
-logger = logging.getLogger("slime_match")
-
 ALTERNATIVES = "keynet, hz+, rootsift, opencv-sift (or slime)"
+HOW_TO_GET = ("download them into that folder on a machine with network access (kornia does it on first use; set TORCH_HOME "
+              "to move the cache)")
 LOFTR_WEIGHTS = ("outdoor", "indoor", "indoor_new")
-
-# Errors of a failed transfer (older kornia lets torch.hub's raise through unchanged).
-_NETWORK_ERRORS = (urllib.error.URLError, ConnectionError, TimeoutError, http.client.HTTPException)
-# kornia >= 0.8 wraps every failed source into one RuntimeError starting with this text.
-_KORNIA_ALL_FAILED = "Failed to load weights from"
-
 
 # --------------------------------------------------------------------------------------------- geometry
 
@@ -104,47 +83,7 @@ def frame_of(size: tuple[int, int], original: tuple[int, int]) -> Frame:
     return Frame.of_sizes(size[::-1], original[::-1])
 
 
-# --------------------------------------------------------------------------------------------- weights
-
-
-def _download_failed(exc: BaseException) -> bool:
-    """Whether ``exc`` says the weights could not be fetched or loaded (not an unrelated bug)."""
-    seen: set[int] = set()
-    cur: BaseException | None = exc
-    while cur is not None and id(cur) not in seen:
-        seen.add(id(cur))
-        if isinstance(cur, _NETWORK_ERRORS):
-            return True
-        if isinstance(cur, RuntimeError) and str(cur).startswith(_KORNIA_ALL_FAILED):
-            return True
-        cur = cur.__cause__
-    return False
-
-
-@contextmanager
-def _pretrained(model: str) -> Iterator[None]:
-    """Around a kornia pretrained constructor: a failed download becomes WeightsNotFoundError naming ``model``.
-
-    kornia's per-attempt warnings are muted (the error says it all); other errors pass through unchanged.
-    """
-    folder = f"{torch.hub.get_dir()}/checkpoints"
-    logger.info("%s: loading kornia's weights from %s (downloaded there when missing)", model, folder)
-    try:
-        with warnings.catch_warnings():
-            warnings.filterwarnings(
-                "ignore", message=r"(Transient failure fetching|Failed to load weights from)"
-            )
-            yield
-    except Exception as exc:
-        if not _download_failed(exc):
-            raise
-        cause = str(exc).splitlines()[0].rstrip(".") if str(exc) else ""
-        raise WeightsNotFoundError(
-            f"{model} weights are missing from (or unreadable in) the torch-hub cache {folder} and could not be "
-            f"downloaded ({type(exc).__name__}: {cause}). Download them there on a machine with network access (kornia "
-            f"does it on first use; set TORCH_HOME to move the cache), or use a method without these weights: "
-            f"{ALTERNATIVES}"
-        ) from exc
+# --------------------------------------------------------------------------------------------- options
 
 
 def _check_device(name: str, what: str) -> None:
@@ -221,7 +160,7 @@ class KorniaLoFTR:
         config = copy.deepcopy(default_cfg)
         if cfg.threshold is not None:
             config["match_coarse"]["thr"] = float(cfg.threshold)
-        with _pretrained(f"LoFTR '{cfg.weights}'"):
+        with pretrained(f"LoFTR '{cfg.weights}'", HOW_TO_GET, ALTERNATIVES):
             model = KF.LoFTR(pretrained=cfg.weights, config=config)
         self._model = model.eval().to(self.device)
 
@@ -243,93 +182,5 @@ class KorniaLoFTR:
         xy0 = frame_of(size0, image0.shape[:2]).to_original(_numpy(out["keypoints0"]).reshape(-1, 2) - 0.5)
         xy1 = frame_of(size1, image1.shape[:2]).to_original(_numpy(out["keypoints1"]).reshape(-1, 2) - 0.5)
         scores = 1.0 - _numpy(out["confidence"]).reshape(-1)
-        synchronize()
-        return xy0, xy1, scores, time.perf_counter() - start
-
-
-# --------------------------------------------------------------------------------------------- DISK + LightGlue
-
-
-@dataclass
-class DiskLightGlueConfig:
-    """kornia DISK ("depth" weights) keypoints + descriptors matched by LightGlue ("disk" weights).
-
-    Attributes:
-        num_features: DISK keypoints per image (at most; the strongest heatmap maxima).
-        max_side: longest side (pixels) of the image DISK sees, 0 = no downscaling (LightGlue's usual 1024).
-        threshold: LightGlue matching score above which a match is kept; None = kornia's default (0.1).
-        device: "auto" | "cpu" | "cuda".
-    """
-
-    num_features: int = 2048
-    max_side: int = 1024
-    threshold: float | None = None
-    device: str = "auto"
-
-
-class KorniaDiskLightGlue:
-    """kornia DISK + LightGlue on the RGB images; scores are ``1 - LightGlue's matching score``.
-
-    Raises (on the first call):
-        WeightsNotFoundError: the DISK or the LightGlue checkpoint is neither cached nor downloadable.
-    """
-
-    def __init__(self, **options: Any) -> None:
-        self.config = dataclass_from(DiskLightGlueConfig, options, "disk-lightglue")
-        cfg = self.config
-        if (
-            isinstance(cfg.num_features, bool)
-            or not isinstance(cfg.num_features, int)
-            or cfg.num_features < 2
-        ):
-            raise ConfigError(
-                f"disk-lightglue num_features must be an integer >= 2, got {cfg.num_features!r}"
-            )
-        _check_max_side(cfg.max_side, 16, "disk-lightglue")
-        _check_threshold(cfg.threshold, "disk-lightglue")
-        _check_device(cfg.device, "disk-lightglue")
-        self._disk: torch.nn.Module | None = None
-        self._lightglue: torch.nn.Module | None = None
-
-    def _build(self) -> None:
-        import kornia.feature as KF
-
-        cfg = self.config
-        self.device = resolve_device(cfg.device)
-        with _pretrained("DISK 'depth'"):
-            disk = KF.DISK.from_pretrained("depth", device=torch.device("cpu"))
-        params = {} if cfg.threshold is None else {"filter_threshold": float(cfg.threshold)}
-        with _pretrained("LightGlue 'disk'"):
-            lightglue = KF.LightGlue("disk", **params)
-        self._disk = disk.eval().to(self.device)
-        self._lightglue = lightglue.eval().to(self.device)
-
-    def _features(self, image: np.ndarray) -> tuple[torch.Tensor, torch.Tensor, tuple[int, int]]:
-        """(H, W, 3) RGB -> DISK keypoints (N, 2) in resized pixels, descriptors (N, 128), resized (h, w)."""
-        size = fit_size(*image.shape[:2], self.config.max_side)
-        rgb = torch.from_numpy(resize_to(image, size)).permute(2, 0, 1)[None].to(self.device)
-        feats = self._disk(rgb, n=self.config.num_features, pad_if_not_divisible=True)[0]
-        return feats.keypoints, feats.descriptors, size
-
-    @torch.inference_mode()
-    def __call__(self, image0: np.ndarray, image1: np.ndarray) -> MethodOutput:
-        if self._disk is None:
-            self._build()
-        synchronize()
-        start = time.perf_counter()
-        (k0, d0, size0), (k1, d1, size1) = self._features(image0), self._features(image1)
-        if len(k0) < 2 or len(k1) < 2:
-            xy0, xy1, scores = empty_output()
-        else:
-
-            def side(k: torch.Tensor, d: torch.Tensor, size: tuple[int, int]) -> dict[str, torch.Tensor]:
-                wh = torch.tensor([[size[1], size[0]]], dtype=k.dtype, device=k.device)
-                return {"keypoints": k[None], "descriptors": d[None], "image_size": wh}
-
-            out = self._lightglue({"image0": side(k0, d0, size0), "image1": side(k1, d1, size1)})
-            idx = out["matches"][0].cpu().numpy()
-            xy0 = frame_of(size0, image0.shape[:2]).to_original(_numpy(k0)[idx[:, 0]].reshape(-1, 2))
-            xy1 = frame_of(size1, image1.shape[:2]).to_original(_numpy(k1)[idx[:, 1]].reshape(-1, 2))
-            scores = 1.0 - _numpy(out["scores"][0]).reshape(-1)
         synchronize()
         return xy0, xy1, scores, time.perf_counter() - start

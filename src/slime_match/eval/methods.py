@@ -23,7 +23,8 @@ import cv2
 import numpy as np
 
 from slime_match.errors import ConfigError
-from slime_match.eval.kornia_peers import DiskLightGlueConfig, KorniaDiskLightGlue, KorniaLoFTR, LoFTRConfig
+from slime_match.choices import LEARNED_BASES
+from slime_match.eval.kornia_peers import KorniaLoFTR, LoFTRConfig
 from slime_match.eval.method_base import MethodFn, MethodOutput, dataclass_from, empty_output, to_grey
 
 logger = logging.getLogger("slime_match")
@@ -158,6 +159,9 @@ def _preset(preset: str, **fixed: Any) -> Callable[..., MethodFn]:
     return lambda **options: MatcherMethod(preset, **{**fixed, **options})
 
 
+LEARNED_TITLES = {"aliked-lg": "ALIKED + LightGlue", "aliked-nn": "ALIKED + mutual NN", "disk-lg": "DISK + LightGlue",
+                  "disk-nn": "DISK + mutual NN", "xfeat-lg": "XFeat + LighterGlue", "xfeat-nn": "XFeat + mutual NN"}
+
 # name -> (the paper's label, factory(**options) -> MethodFn)
 REGISTRY: dict[str, tuple[str, Callable[..., MethodFn]]] = {
     "slime": ("Slimed Hz+", _preset("slime")),
@@ -176,7 +180,7 @@ REGISTRY: dict[str, tuple[str, Callable[..., MethodFn]]] = {
     "opencv-sift": ("OpenCV SIFT", lambda **o: OpenCVSift(**o)),
     "asift": ("OpenCV ASIFT", lambda **o: OpenCVAsift(**o)),
     "loftr": ("LoFTR", lambda **o: KorniaLoFTR(**o)),
-    "disk-lightglue": ("DISK + LightGlue", lambda **o: KorniaDiskLightGlue(**o)),
+    **{name: (LEARNED_TITLES[name], _preset(name)) for name in LEARNED_BASES},
 }
 
 
@@ -250,6 +254,4 @@ def _accepted(name: str) -> set[str]:
         return set(AsiftConfig.__dataclass_fields__)
     if name == "loftr":
         return set(LoFTRConfig.__dataclass_fields__)
-    if name == "disk-lightglue":
-        return set(DiskLightGlueConfig.__dataclass_fields__)
     return {"device", "seed"}

@@ -97,8 +97,8 @@ def pretrained(model: str, how_to_get: str, alternatives: str) -> Iterator[None]
         cause = str(error).splitlines()[0].rstrip(".") if str(error) else ""
         raise WeightsNotFoundError(
             f"{model} weights are missing from (or unreadable in) the torch-hub cache {folder} and could not be "
-            f"downloaded ({type(error).__name__}: {cause}). {how_to_get[0].upper() + how_to_get[1:]}, or use a "
-            f"method without these weights: {alternatives}") from error
+            f"downloaded ({type(error).__name__}: {cause}). To get them: {how_to_get}; or use a method without "
+            f"these weights: {alternatives}") from error
 
 
 def load_learned(model: str, build: Callable[[], nn.Module], device: torch.device | str = "cpu") -> nn.Module:
@@ -115,8 +115,8 @@ def load_learned(model: str, build: Callable[[], nn.Module], device: torch.devic
         if hosts is not None:  # offline: fail now rather than after kornia's retries
             raise WeightsNotFoundError(
                 f"{what} weights are not in the torch-hub cache {path.parent} and could not be downloaded (no "
-                f"download host resolves: {', '.join(hosts)}; offline?). {HOW_TO_GET[0].upper() + HOW_TO_GET[1:]}, "
-                f"or use a method without these weights: {ALTERNATIVES}")
+                f"download host resolves: {', '.join(hosts)}; offline?). To get them: {HOW_TO_GET}; or use a method "
+                f"without these weights: {ALTERNATIVES}")
     with pretrained(what, HOW_TO_GET, ALTERNATIVES):
         network = build()
     return network.eval().to(device)
