@@ -39,6 +39,17 @@ def unit_frames(xy: torch.Tensor) -> torch.Tensor:
     return laf
 
 
+def xfeat_pixels(keypoints: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
+    """XFeat's (N, 2) keypoints in the pixels of the (H, W) image it was given. XFeat detects on the image resized
+    to multiples of 32 (bilinear, pixel edges aligned) and scales its keypoints by the size ratio only; the exact
+    map of that resize adds ``(ratio - 1) / 2`` px per axis."""
+    height, width = size
+    inner = (max(32, width // 32 * 32), max(32, height // 32 * 32))
+    ratio = torch.tensor([width / inner[0], height / inner[1]], dtype=torch.float64)
+    xy = Frame.of_sizes(inner, (width, height)).to_original((keypoints.double().cpu() / ratio).numpy())
+    return torch.from_numpy(xy).float().to(keypoints.device)
+
+
 class LearnedPipeline(BasePipeline):
     """A learned extractor (``extractor``: "aliked", "disk" or "xfeat") and a matcher (``matcher``: "lightglue"
     or "mutual-nn"), both kornia's networks on the working images.
@@ -81,23 +92,12 @@ class LearnedPipeline(BasePipeline):
             xy, descriptors, scores = found.keypoints, found.descriptors, found.detection_scores
         else:
             found = self.network.detectAndCompute(rgb)[0]
-            xy, descriptors, scores = self._xfeat_pixels(found["keypoints"], image.shape[:2]), \
+            xy, descriptors, scores = xfeat_pixels(found["keypoints"], image.shape[:2]), \
                 found["descriptors"], found["scores"]
         if len(xy) == 0:
             return _empty_features(DESCRIPTOR_DIMS[self.extractor], self.device)
         laf = unit_frames(xy)
         return Features(laf, descriptors.float(), scores.float().reshape(-1), laf)
-
-    def _xfeat_pixels(self, keypoints: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
-        """XFeat's (N, 2) keypoints in the pixels of an (H, W) image. XFeat detects on the image resized to
-        multiples of 32 (bilinear, pixel edges aligned) and scales its keypoints by the size ratio only; the
-        exact map of that resize adds ``(ratio - 1) / 2`` per axis."""
-        height, width = size
-        inner = (max(32, width // 32 * 32), max(32, height // 32 * 32))
-        ratio = torch.tensor([width / inner[0], height / inner[1]], device=keypoints.device)
-        frame = Frame.of_sizes(inner, (width, height))
-        xy = frame.to_original((keypoints / ratio).double().cpu().numpy())
-        return torch.from_numpy(xy).float().to(keypoints.device)
 
     @torch.inference_mode()
     def match(self, features0, features1, size0, size1, candidate_filter=None) -> Matches:
