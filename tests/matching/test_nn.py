@@ -12,6 +12,7 @@ from slime_match.matching.nn import (
     knn,
     match_fginn,
     match_mutual_nn,
+    match_mutual_nn_ratio,
     match_nn_ratio,
     nearest_far,
 )
@@ -169,6 +170,28 @@ def test_mutual_nn_brute_force():
     for (i, j), s in got.items():
         assert s == pytest.approx(dm[i, j], rel=1e-4, abs=1e-5)
     assert len(match_mutual_nn(torch.zeros(0, 8), d1)) == 0
+
+
+def test_mutual_nn_ratio_constructed_and_brute_force():
+    d1 = torch.tensor([[1.0, 0.0], [0.0, 1.0], [0.0, 0.9]])
+    d0 = torch.tensor([[0.9, 0.0], [0.0, 0.945], [0.0, 0.5]])
+    # row 0 distinctive; row 1 ambiguous (0.045 vs 0.055); row 2's nearest (column 2) prefers row 1: not mutual
+    res = as_dict(match_mutual_nn_ratio(d0, d1, 0.8))
+    assert set(res) == {(0, 0)} and res[(0, 0)] == pytest.approx(0.1 / np.hypot(0.9, 0.9), rel=1e-5)
+    res = as_dict(match_mutual_nn_ratio(d0, d1, 1.0))
+    assert set(res) == {(0, 0), (1, 2)} and res[(1, 2)] == pytest.approx(0.045 / 0.055, rel=1e-4)
+    d0, d1, _, _ = random_case(3)
+    dm = dists(d0, d1)
+    order = np.sort(dm, 1)
+    ref = {(i, int(dm[i].argmin())) for i in range(len(dm))
+           if dm[:, dm[i].argmin()].argmin() == i and order[i, 0] / order[i, 1] < 0.9}
+    got = match_mutual_nn_ratio(d0, d1, 0.9, block_size=16)
+    assert set(as_dict(got)) == ref and len(ref) > 10 and np.all(np.diff(got.scores) >= 0)
+    assert len(match_mutual_nn_ratio(torch.zeros(0, 8), d1)) == 0
+    assert len(match_mutual_nn_ratio(d0[:1], d1[:1])) == 1  # one candidate: no competitor, ratio 0
+    for ratio in (0, 1.5):
+        with pytest.raises(ConfigError):
+            match_mutual_nn_ratio(d0, d1, ratio)
 
 
 @pytest.mark.parametrize("k", [2, 10])
