@@ -39,11 +39,12 @@ def test_the_parser_offers_what_the_code_accepts():
     from slime_match.geometry.backends import estimate_geometry  # noqa: F401  (the backends load)
     from slime_match.pipelines.registry import BASE_NAMES
 
-    assert choices.BUILTIN_BASES == BASE_NAMES and ("slime", *choices.BUILTIN_BASES) == methods()
+    assert (*choices.BUILTIN_BASES, *choices.LEARNED_BASES) == BASE_NAMES and ("slime", *BASE_NAMES) == methods()
     assert choices.DESCRIPTOR_CHOICES == ("auto", *DESCRIPTOR_METHODS)
     match = build_parser()._subparsers._group_actions[0].choices["match"]
     offered = {action.dest: tuple(action.choices) for action in match._actions if action.choices}
     assert offered["ransac"] == choices.RANSAC_CHOICES and offered["method"] == ("slime", *BASE_NAMES)
+    assert offered["base"] == choices.BUILTIN_BASES  # the learned bases run alone
     assert offered["detection"] == choices.DETECTIONS and offered["tile_test"] == choices.TILE_TESTS
 
 

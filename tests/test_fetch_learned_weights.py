@@ -5,8 +5,8 @@ import zipfile
 
 import pytest
 import torch
-
 from conftest import ROOT
+
 from slime_match.features import learned_weights
 
 MODELS = ("aliked-n16", "aliked-n32", "xfeat")

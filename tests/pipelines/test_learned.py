@@ -4,11 +4,13 @@ empty images, the CLI, the batch runner and one real WxBS pair."""
 
 import json
 import socket
+from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 import torch
+from conftest import DATA, require, require_learned_weights, run_cli
 from skimage.data import astronaut
 
 import slime_match as sm
@@ -17,8 +19,6 @@ from slime_match.config import make_config
 from slime_match.errors import ConfigError, WeightsNotFoundError
 from slime_match.pipelines.learned import LEARNED_BASES as PIPELINE_PARTS
 from slime_match.pipelines.learned import unit_frames, xfeat_pixels
-
-from conftest import DATA, require, require_learned_weights, run_cli
 
 # the checkpoints each method reads
 NEEDS = {"aliked-lg": ("aliked-n16", "lightglue-aliked"), "aliked-nn": ("aliked-n16",),
@@ -205,17 +205,14 @@ def test_a_black_image_gives_an_empty_result(name):
 
 def test_cli_match_and_batch(capsys, pair, tmp_path):
     require_learned_weights(*NEEDS["xfeat-lg"])
-    code, out, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "one", "--method", "xfeat-lg",
+    code, _out, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "one", "--method", "xfeat-lg",
                              "--ransac", "magsac-fundamental", "--no-plot")
     assert code == 0, err
     matches = np.load(tmp_path / "one" / "matches.npz")
     assert len(matches["keypoints0"]) > 50 and matches["inliers"].sum() > 30
-    folder = tmp_path / "images"
-    folder.mkdir()
-    for path in pair:
-        (folder / path.rsplit("/", 1)[-1]).write_bytes(open(path, "rb").read())
+    folder = Path(pair[0]).parent  # left.png and right.png
     (tmp_path / "pairs.txt").write_text("left.png right.png\n")
-    code, out, err = run_cli(capsys, "pairs", tmp_path / "pairs.txt", "--images", folder, "-o", tmp_path / "run",
+    code, _out, err = run_cli(capsys, "pairs", tmp_path / "pairs.txt", "--images", folder, "-o", tmp_path / "run",
                              "--method", "xfeat-lg", "--workers", "1")
     assert code == 0, err
     (record,) = json.loads((tmp_path / "run" / "pairs.json").read_text())["pairs"]

@@ -106,7 +106,8 @@ def rgb_pair(pair):
 
 
 def test_built_in_names_come_from_the_registry():
-    assert BASE_NAMES == base_names() == ("hz+", "rootsift", "keynet")
+    assert BASE_NAMES == base_names() == ("hz+", "rootsift", "keynet", "aliked-lg", "aliked-nn", "disk-lg", "disk-nn",
+                                          "xfeat-lg", "xfeat-nn")
     assert PIPELINES["hz+"] is HzPlusPipeline and PIPELINES["rootsift"] is RootSiftPipeline
 
 

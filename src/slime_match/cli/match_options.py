@@ -8,9 +8,9 @@ import argparse
 from ..choices import (
     BUILTIN_BASES,
     DESCRIPTOR_CHOICES,
-    LEARNED_BASES,
     DETECTIONS,
     DEVICES,
+    LEARNED_BASES,
     ORIENTATION_CHOICES,
     RANSAC_CHOICES,
     SHAPE_METHODS,

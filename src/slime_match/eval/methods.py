@@ -22,8 +22,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from slime_match.errors import ConfigError
 from slime_match.choices import LEARNED_BASES
+from slime_match.errors import ConfigError
 from slime_match.eval.kornia_peers import KorniaLoFTR, LoFTRConfig
 from slime_match.eval.method_base import MethodFn, MethodOutput, dataclass_from, empty_output, to_grey
 
