@@ -10,9 +10,10 @@
 # metrics (about 10 min for the whole cache here).
 # Environment: OUT (results folder, default results/full), DESCRIPTOR (Hz+/Slime/Key.Net descriptor: tfeat where
 # HardNet's weights are absent, as on the project machines; auto elsewhere), METHODS (';'-separated method
-# specs, default: the paper's set and OpenCV SIFT; the registry's slime-fast, loftr and disk-lightglue are
-# left out: the kornia peers need weights the project machines lack, add them with
-# METHODS="...;loftr;disk-lightglue"), TORCH_HOME (kornia weights).
+# specs, default: the paper's set and OpenCV SIFT; the registry's slime-fast, loftr and the learned bases
+# (aliked-lg, disk-lg, xfeat-lg and their -nn variants) are left out: add them with
+# METHODS="...;loftr;aliked-lg", their weights in TORCH_HOME, see scripts/fetch_learned_weights.py),
+# TORCH_HOME (kornia weights).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [[ -z "${TORCH_HOME:-}" && -d ../shared/weights ]]; then

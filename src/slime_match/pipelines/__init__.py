@@ -1,7 +1,9 @@
-"""Base matching pipelines (Hz+, RootSIFT and Key.Net) behind one interface, registered by name.
+"""Base matching pipelines (Hz+, RootSIFT, Key.Net and the learned ones) behind one interface, registered by
+name.
 
 :mod:`.base` defines the interface (:class:`BasePipeline`: ``extract`` and ``match``, and Slime's hooks),
-:mod:`.hzplus`, :mod:`.rootsift` and :mod:`.keynet` the built-in pipelines, :mod:`.registry` the names.
+:mod:`.hzplus`, :mod:`.rootsift`, :mod:`.keynet` and :mod:`.learned` (ALIKED, DISK, XFeat with LightGlue or
+mutual NN) the built-in pipelines, :mod:`.registry` the names.
 """
 
 from .base import BaseConfig, BasePipeline, CandidateFilter, unimplemented
