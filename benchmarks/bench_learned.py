@@ -1,12 +1,13 @@
-"""Speed of a learned base pipeline alone against kornia's own pipeline on the same images, in the same process.
+"""Speed of a learned base pipeline alone against kornia's own pipeline on the same images, in one process.
 
-    python benchmarks/bench_learned.py [DATA/hard/wxbs] [--method aliked-lg] [--repeat 3] [--out results/bench_learned.json]
+    python benchmarks/bench_learned.py [DATA/hard/wxbs] [--method aliked-lg] [--repeat 3] \
+        [--out results/bench_learned.json]
 
 For every pair of a WxBS-style folder (``01.*``, ``02.*``): ``slime_match.Matcher`` with the method's preset
 (1024 px working size, 4096 keypoints, no views, no RANSAC, from the image files) against kornia's pipeline
 written as kornia's documentation does: the images read with OpenCV, those over 1024 px on the longer side
-shrunk to it with kornia's ``resize`` (antialiased), kornia's ALIKED / DISK / XFeat and its LightGlue / LighterGlue with the
-same weights. Each side runs ``--repeat`` times per pair after a warm-up pair; the minimum per pair is kept,
+shrunk to it with kornia's ``resize`` (antialiased), kornia's ALIKED / DISK / XFeat and its LightGlue /
+LighterGlue with the same weights (mutual NN with ratio 0.9, kornia's "smnn", for the -nn methods). Each side runs ``--repeat`` times per pair after a warm-up pair; the minimum per pair is kept,
 and the JSON holds the per-pair seconds, their sums, the ratio ours / kornia's and the match counts. The
 learned weights come from kornia's cache (``TORCH_HOME``; see ``scripts/fetch_learned_weights.py``).
 """
@@ -120,7 +121,8 @@ def main(argv: list[str] | None = None) -> int:
         theirs_s, theirs_n = best_of(lambda a=path0, b=path1: theirs(a, b), args.repeat)
         rows.append({"pair": name, "ours_s": round(ours_s, 4), "kornia_s": round(theirs_s, 4),
                      "ours_matches": ours_n, "kornia_matches": theirs_n})
-        print(f"{name:20s} ours {ours_s:6.2f} s ({ours_n} matches)   kornia {theirs_s:6.2f} s ({theirs_n} matches)")
+        print(f"{name:20s} ours {ours_s:6.2f} s ({ours_n} matches)   "
+              f"kornia {theirs_s:6.2f} s ({theirs_n} matches)")
     total_ours, total_theirs = (sum(r[key] for r in rows) for key in ("ours_s", "kornia_s"))
     report = {"method": args.method, "data": str(args.data), "repeat": args.repeat, "pairs": rows,
               "ours_s": round(total_ours, 3), "kornia_s": round(total_theirs, 3),

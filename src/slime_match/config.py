@@ -63,8 +63,8 @@ class MatchConfig:
         max_side: images whose longer side is larger are shrunk to this many px (area interpolation) before
             matching; it wins over ``min_side`` for an elongated image; "auto": the method's default (1200 for
             Slime, 1024 for a learned base alone, off for the other base pipelines alone); 0, "none" or None:
-            off. The two images share one factor when one meets both images' limits, else each gets its own (``resize.pair_factors``); the matches are mapped
-            back to original-image pixels.
+            off. The two images share one factor when one meets both images' limits, else each gets its own
+            (``resize.pair_factors``); the matches are mapped back to original-image pixels.
         views: simulated views of image 0 for extreme viewpoints (ASIFT tilts, :class:`~slime_match.views.
             ViewConfig`): "auto" (default) only when the plain run finds too little consistent geometry,
             "always", "off"; for Slime and for a base pipeline alone.

@@ -59,7 +59,8 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
     everyday.add_argument("--max-side", type=parse_side, default=None, metavar="PX|none",
                           help="shrink images whose longer side is larger to this many px before matching "
                                "(default auto: 1200 for Slime, as the paper's images; 1024 for a learned base "
-                               "alone; none for the other base pipelines alone); wins over --min-side; matches come back in original pixels")
+                               "alone; none for the other base pipelines alone); wins over --min-side; matches "
+                               "come back in original pixels")
     internals.add_argument("--magnification", type=float, default=None,
                            help="patch size over the detected region (default 6 over HarrisZ+ ellipses, 1 over "
                                 "Key.Net frames); smaller patches give a weaker base")

@@ -38,8 +38,8 @@ from slime_match.geometry.frames import Frame
 from slime_match.matcher import resolve_device
 
 ALTERNATIVES = "keynet, hz+, rootsift, opencv-sift (or slime)"
-HOW_TO_GET = ("download them into that folder on a machine with network access (kornia does it on first use; set TORCH_HOME "
-              "to move the cache)")
+HOW_TO_GET = ("download them into that folder on a machine with network access (kornia does it on first use; "
+              "set TORCH_HOME to move the cache)")
 LOFTR_WEIGHTS = ("outdoor", "indoor", "indoor_new")
 
 # --------------------------------------------------------------------------------------------- geometry

@@ -26,7 +26,7 @@ from torch import nn
 
 from slime_match.choices import ALIKED_MODELS
 from slime_match.errors import ConfigError, WeightsNotFoundError
-from slime_match.features.weights import _unresolved_hosts
+from slime_match.features.weights import unresolved_hosts
 
 logger = logging.getLogger("slime_match")
 
@@ -111,7 +111,7 @@ def load_learned(model: str, build: Callable[[], nn.Module], device: torch.devic
     path = cache_path(model)
     what = f"{model} ('{path.name}')"
     if not path.is_file():
-        hosts = _unresolved_hosts(_HOSTS)
+        hosts = unresolved_hosts(_HOSTS)
         if hosts is not None:  # offline: fail now rather than after kornia's retries
             raise WeightsNotFoundError(
                 f"{what} weights are not in the torch-hub cache {path.parent} and could not be downloaded (no "

@@ -132,7 +132,7 @@ def _download_urls(spec: _Spec) -> list[str]:
     return [urls] if isinstance(urls, str) else list(urls)
 
 
-def _unresolved_hosts(urls: list[str]) -> list[str] | None:
+def unresolved_hosts(urls: list[str]) -> list[str] | None:
     """The URLs' host names when none of them resolves (no network or no DNS), else None."""
     hosts = list(dict.fromkeys(urlparse(url).hostname or "" for url in urls))
     for host in hosts:
@@ -164,7 +164,7 @@ def load_state_dict(name: str, weights_dir: str | Path | None = None, retry_offl
     download = importlib.import_module("kornia.core.download")
     urls = _download_urls(spec)
     if not (folder / spec.file).is_file():
-        hosts = None if retry_offline else _unresolved_hosts(urls)
+        hosts = None if retry_offline else unresolved_hosts(urls)
         if hosts is not None:
             raise _not_found(name, spec, folder, f"no download host resolves: {', '.join(hosts)}; offline?")
         logger.info("%s weights not in %s: trying to download them", name, folder)
