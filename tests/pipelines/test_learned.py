@@ -120,7 +120,7 @@ def test_missing_weights_name_the_file_and_how_to_get_it(offline, name, file):
     assert not offline.exists() or not any(offline.iterdir())  # nothing half-written
 
 
-def test_missing_lightglue_weights_are_named_when_the_extractor_loads(offline, monkeypatch, tmp_path):
+def test_missing_lightglue_weights_are_named_when_the_extractor_loads(offline):
     import kornia.feature as KF
 
     # ALIKED's checkpoint is there (random weights), LightGlue's is not

@@ -67,7 +67,6 @@ class LearnedPipeline(BasePipeline):
 
     extractor: str = ""
     matcher: str = ""
-    slime_global_dtm = False
 
     def __init__(self, config: BaseConfig, device: torch.device) -> None:
         self.config, self.device = config, device
