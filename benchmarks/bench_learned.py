@@ -58,7 +58,7 @@ class KorniaPipeline:
         import kornia
 
         image = cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
-        tensor = kornia.image_to_tensor(np.ascontiguousarray(image), keepdim=False).float() / 255.0
+        tensor = kornia.image.image_to_tensor(np.ascontiguousarray(image), keepdim=False).float() / 255.0
         if max(tensor.shape[-2:]) > self.side:  # shrunk only, as the matcher's working size
             tensor = kornia.geometry.resize(tensor, self.side, side="long", antialias=True)
         if self.extractor == "aliked":

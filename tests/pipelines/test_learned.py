@@ -149,7 +149,7 @@ def _rotated_pair(angle: float = 20.0, scale: float = 0.8) -> tuple[np.ndarray, 
 
 # correct fractions (3 px) measured on _rotated_pair(20, 0.8), views off, CPU: aliked-lg 1.00 (261 matches),
 # aliked-nn 0.93 (232), disk-lg 1.00 (714), disk-nn 0.95 (367), xfeat-lg 0.97 (927), xfeat-nn 0.87 (507);
-# the bounds below are 10-15% under them
+# the fractions below are 12-14% under them, the match counts about 22% under
 BOUNDS = {"aliked-lg": (0.88, 200), "aliked-nn": (0.8, 180), "disk-lg": (0.88, 550), "disk-nn": (0.82, 280),
           "xfeat-lg": (0.85, 700), "xfeat-nn": (0.75, 400)}
 
