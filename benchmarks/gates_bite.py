@@ -23,7 +23,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
-from gate_degradations import DEGRADATIONS  # noqa: E402
+from gate_degradations import DEGRADATIONS
 
 
 def run_gates(degradation: str) -> dict:
