@@ -93,6 +93,22 @@ def test_pairs_run_resume_failures_and_config_guard(images, tmp_path, capsys):
     assert json.loads((out / "run.json").read_text())["config"]["base"]["upright"] is True
 
 
+def test_a_rerun_leaves_only_its_own_files_in_a_pair_folder(images, tmp_path, capsys):
+    pairs = _pairs_file(tmp_path, "left.png right.png\n")
+    out, folder = tmp_path / "run", tmp_path / "run" / "left.png__right.png"
+    code, _, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST, "--plot")
+    assert code == 0, err
+    (folder / "notes.txt").write_text("mine")
+    code, _, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST, "--overwrite")
+    assert code == 0, err
+    assert sorted(p.name for p in folder.iterdir()) == ["matches.npz", "notes.txt", "summary.json"]
+    (images / "left.png").write_bytes(b"\x89PNG not really")  # the pair now fails: its earlier files go
+    code, _, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST, "--overwrite")
+    assert code == 1, err
+    assert sorted(p.name for p in folder.iterdir()) == ["notes.txt"]
+    assert json.loads((out / "pairs.json").read_text())["pairs"][0]["status"] == "failed"
+
+
 def test_pairs_bad_input_fails_before_any_work(images, tmp_path, capsys):
     out = tmp_path / "run"
     pairs = _pairs_file(tmp_path, "left.png right.png\nleft.png missing.png\n")
