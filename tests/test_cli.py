@@ -162,10 +162,13 @@ def test_set_any_option_and_rerun_a_recorded_configuration(pair, tmp_path, capsy
     (["--set", "slime.tiles.nope=1"], "unknown option 'slime.tiles.nope'"),
     (["--set", "slime.tiles.t_xi=many"], "cannot read 'many' as float"),
     (["--config", "missing.json"], "cannot read a configuration from missing.json"),
+    (["--method", "hz+", "--set", "views.min_support=50"], "'views.min_support' is the threshold of Slime"),
+    (["--views", "off", "--set", "views.tilts=2"], "'views.tilts' sets the simulated views, and they are off"),
 ])
 def test_bad_settings_and_configs_are_one_line_errors(pair, tmp_path, capsys, options, message):
     code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "out", *options)
     assert code == 2 and message in err and not (tmp_path / "out").exists()
+    assert len(err.strip().splitlines()) == 1
 
 
 def test_a_setting_without_a_value_is_a_usage_error(pair, tmp_path, capsys):
