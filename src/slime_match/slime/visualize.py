@@ -87,11 +87,13 @@ def _stage_figure(name: str, data: dict[str, np.ndarray], img0: np.ndarray, img1
     elif name == "planes":
         plane = data["block_matches_plane"]
         draw_matches(ax, img0, img1, data["block_matches_xy0"], data["block_matches_xy1"],
-                     _set_colors(plane), title=f"block-pair planes M_l: {len(data['planes_H'])} planes, "
-                                              f"{len(plane)} matches (colour = plane)")
+                     _set_colors(plane), title=f"planes of the block pairs (M_l): {len(data['planes_H'])} "
+                                              f"planes, {len(plane)} matches (colour = plane)")
     elif name in ("superset", "fbar", "ftheta"):
         rows, set_id = _sets_to_rows(data, name)
-        titles = {"superset": "superset H", "fbar": "F-bar", "ftheta": "F^theta (fused, oriented)"}
+        titles = {"superset": "tile match sets of every plane (superset H)",
+                  "fbar": "the largest sets, one per tile (F-bar)",
+                  "ftheta": "sets fused and at the global orientation (F^theta)"}
         draw_matches(ax, img0, img1, data["table_xy0"][rows], data["table_xy1"][rows], _set_colors(set_id),
                      title=f"{titles[name]}: {int(set_id.max(initial=-1)) + 1} sets, {len(rows)} entries")
     else:
