@@ -1,5 +1,8 @@
 """Result folders: a run's owned files replaced all at once, other files left alone, nothing on failure."""
 
+import os
+import signal
+
 import pytest
 
 from slime_match.output_folder import remove_owned_files, replacing_owned_files
@@ -76,3 +79,21 @@ def test_remove_owned_files_leaves_the_rest(earlier, tmp_path):
     assert _files(earlier) == {"notes.txt": "mine", "maps/a/mine.png": "mine too"}
     remove_owned_files(tmp_path / "absent", OWNED)
     assert not (tmp_path / "absent").exists()
+
+
+def test_a_ctrl_c_while_the_files_move_in_waits_until_they_are_all_in(earlier, monkeypatch):
+    moves, replace = [], os.replace
+
+    def replace_then_interrupt(source, target):
+        moves.append(target)
+        replace(source, target)
+        if len(moves) == 1:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(os, "replace", replace_then_interrupt)
+    with pytest.raises(KeyboardInterrupt), replacing_owned_files(earlier, OWNED, last="summary.json") as staging:
+        (staging / "result.txt").write_text("new")
+        (staging / "summary.json").write_text("new summary")
+    assert len(moves) == 2  # the interruption came after the first move and was acted on after the last
+    assert _files(earlier) == {"result.txt": "new", "summary.json": "new summary", "notes.txt": "mine",
+                               "maps/a/mine.png": "mine too"}

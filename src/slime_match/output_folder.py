@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import tempfile
+import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -21,8 +23,9 @@ def replacing_owned_files(out: str | os.PathLike, owned: Sequence[str], last: st
     Write the new files under the yielded folder, at their paths relative to ``out``. When the block ends
     without an error, every file of ``out`` that matches a pattern of ``owned`` and was not written again is
     removed (with the sub-folders that this empties), and the new files are moved in, ``last`` at the end. An
-    error or an interruption inside the block leaves ``out`` as it was. ``last`` (e.g. ``summary.json``) is
-    removed first and moved in last, so a folder holding it holds one complete result.
+    error or an interruption inside the block leaves ``out`` as it was; a Ctrl-C during the moves (in the main
+    thread) is held back until they are done. ``last`` (e.g. ``summary.json``) is removed first and moved in
+    last, so a folder holding it holds one complete result.
 
     Args:
         out: the result folder (created when missing).
@@ -42,7 +45,8 @@ def replacing_owned_files(out: str | os.PathLike, owned: Sequence[str], last: st
         strays = [rel.as_posix() for rel in new if not _owned(rel, owned)]
         if strays:
             raise ValueError(f"staged files not among the owned patterns {list(owned)}: {strays}")
-        _commit(out, staging, new, owned, last)
+        with _interrupt_deferred():
+            _commit(out, staging, new, owned, last)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
 
@@ -57,6 +61,25 @@ def remove_owned_files(out: str | os.PathLike, owned: Sequence[str], last: str |
 def _owned(rel: Path, owned: Sequence[str]) -> bool:
     """Whether the relative path ``rel`` matches a pattern of ``owned`` as a whole (not only its last parts)."""
     return any(len(rel.parts) == len(Path(pattern).parts) and rel.match(pattern) for pattern in owned)
+
+
+@contextmanager
+def _interrupt_deferred() -> Iterator[None]:
+    """Within the block, SIGINT (Ctrl-C) is recorded and acted on only when the block ends (in the main thread,
+    the only one that receives Python's signal handlers; elsewhere the block runs as it is)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught and callable(previous):
+        previous(signal.SIGINT, None)
+    elif caught and previous == signal.SIG_DFL:
+        raise KeyboardInterrupt
 
 
 def _commit(out: Path, staging: Path, new: list[Path], owned: Sequence[str], last: str | None) -> None:
