@@ -115,6 +115,26 @@ def test_rerun_loads_cache_without_recomputing(first_run, tiny_data, monkeypatch
     assert (out / "table.csv").read_text() == table  # metrics are deterministic under the seed
 
 
+def test_a_rerun_replaces_the_report_and_an_interrupted_one_leaves_it(first_run, tiny_data, tmp_path, monkeypatch):
+    out = tmp_path / "copy"
+    shutil.copytree(first_run[0], out)
+    (out / "notes.txt").write_text("mine")
+    report = {name: (out / name).read_bytes() for name in ("metrics.json", "table.md", "table.csv")}
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as patch:
+        patch.setattr(bench, "evaluate_pair", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            bench.main([*_args(tiny_data, out), "--map-pairs", "0"])
+    assert {name: (out / name).read_bytes() for name in report} == report and (out / "maps").is_dir()
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+    assert bench.main([*_args(tiny_data, out), "--map-pairs", "0"]) == 0  # from the cache
+    assert not (out / "maps").exists()  # the earlier run's maps go, the user's file stays
+    assert (out / "notes.txt").read_text() == "mine" and (out / "table.csv").read_bytes() == report["table.csv"]
+
+
 def test_predictions_record_their_code_and_stale_ones_are_reported(first_run, tiny_data, tmp_path, caplog):
     out, _ = first_run
     summary = json.loads((out / "metrics.json").read_text())
