@@ -12,6 +12,9 @@ from slime_match.io import save_json, save_npz
 
 # the planar pair: image 1 is image 0 seen through this homography (image 0 -> 1)
 PLANAR_H = np.array([[0.92, 0.06, 18.0], [-0.04, 0.95, 12.0], [1.5e-4, 8e-5, 1.0]])
+# a second plane of the same two views: its homography differs from PLANAR_H by e' v^T, with the epipole e' of
+# image 1 at infinity along x (so F = [e']_x PLANAR_H holds for both planes)
+SECOND_H = PLANAR_H + np.outer([1.0, 0.0, 0.0], [0.0, 0.0, 15.0])
 MANY = 20_000  # matches of the run's big pair
 
 

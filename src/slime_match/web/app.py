@@ -35,7 +35,7 @@ from starlette.requests import ClientDisconnect
 from .. import __version__
 from ..errors import SlimeMatchError
 from ..io import IMAGE_EXTS, load_image
-from . import annotate
+from . import annotate, annotation_models
 from .folders import FolderError, Root, Roots, unique_names
 from .jobs import JobRunner
 from .payloads import matches_payload, stages_payload
@@ -384,7 +384,7 @@ def _add_routes(app: FastAPI, state: _State) -> None:
     @app.post("/api/annotate/fit")
     async def annotate_fit(request: Request):
         body = _body_object(await _json(request), "pairs")
-        return annotate.fit(annotate.read_pairs(body["pairs"]))
+        return annotation_models.fit(annotate.read_pairs(body["pairs"]))
 
     @app.post("/api/annotate/export")
     async def annotate_export(request: Request):
