@@ -43,26 +43,26 @@ function paintAnnotations(ctx, v) {
   }
 }
 
-// ---------------------------------------------------------------- annotate
+// ---------------------------------------------------------------- the annotation's life cycle
 
 const snapshot = () => JSON.stringify({ pairs: S.annot.pairs, pending: S.annot.pending, set: S.annot.set });
 function remember() {
   S.annot.history.push(snapshot());
   if (S.annot.history.length > 200) S.annot.history.shift();
 }
-function resetAnnotations() {
-  Object.assign(S.annot, { pairs: [], pending: null, set: 0, selected: -1, history: [], fit: null, fixedH: null });
-  annotationsChanged();
-}
 
-function annotationsChanged() {
-  S.annot.saved = "";  // a save's message stands until the annotations change
-  $("ann-set").textContent = String(S.annot.set);
+// after every change: the table, the draft and, a moment later, the fit; `edited` marks the pair unsaved
+function annotationsChanged({ edited = true } = {}) {
+  const A = S.annot;
+  if (edited) { A.dirty = true; A.saved = ""; }  // a save's message stands until the annotations change
+  keepDraft(A);
+  $("ann-set").textContent = String(A.set);
   renderPairsTable();
+  renderAnnotationStatus();
   view.redraw();
   clearTimeout(annotationsChanged.timer);
-  S.annot.fitting += 1;
-  annotationsChanged.timer = setTimeout(guarded(refit), 60);
+  if (!annotationsChanged.timer) S.fitting += 1;  // one fit counted while its timer waits
+  annotationsChanged.timer = setTimeout(() => { annotationsChanged.timer = null; guarded(refit)(); }, 60);
 }
 
 async function refit() {
@@ -70,29 +70,41 @@ async function refit() {
   try {
     A.fit = await api("/api/annotate/fit", { method: "POST", json: { pairs: A.pairs } });
   } finally {
-    A.fitting = Math.max(0, A.fitting - 1);
+    S.fitting = Math.max(0, S.fitting - 1);
   }
+  if (A !== S.annot) return;  // the pair changed meanwhile
   renderPairsTable();
-  const visible = A.fit.visible;
-  const parts = [`${A.pairs.length} pairs (${visible} visible), set ${A.set}`];
-  parts.push(A.fit.H ? "H: fitted" : `H: needs ${A.fit.min_pairs.H} pairs`);
-  parts.push(A.fit.F ? "F: fitted" : `F: needs ${A.fit.min_pairs.F} pairs`);
-  const res = (A.model === "H" ? A.fit.residual_H : A.fit.residual_F).filter((r) => r !== null);
-  if (res.length) parts.push(`mean residual ${fmt(res.reduce((a, b) => a + b, 0) / res.length, 2)} px`);
-  if (A.saved) parts.push(A.saved);  // a fit that answers after a save keeps its message
-  $("ann-status").textContent = parts.join("\n");
+  renderAnnotationStatus();
   view.redraw();
+}
+
+function renderAnnotationStatus() {
+  const A = S.annot, fit = A.fit;
+  if (!pairKey(A.images)) { $("ann-status").textContent = "choose two images to annotate them"; return; }
+  const visible = A.pairs.filter((p) => !p.occluded).length;
+  const parts = [`${A.pairs.length} pairs (${visible} visible), set ${A.set}` + (A.dirty && A.pairs.length
+    ? " · unsaved (kept as a draft in this browser)" : "")];
+  if (fit) {
+    parts.push(fit.H ? "H: fitted" : fit.why.H);
+    parts.push(fit.F ? "F: fitted" : fit.why.F);
+    const res = (A.model === "H" ? fit.residual_H : fit.residual_F).filter((r) => r !== null && r !== undefined);
+    if (res.length) parts.push(`mean residual to ${A.model}: ${fmt(res.reduce((a, b) => a + b, 0) / res.length, 2)} px`);
+  }
+  if (A.saved) parts.push(A.saved);
+  $("ann-status").textContent = parts.join("\n");
 }
 
 function renderPairsTable() {
   const A = S.annot, tbody = $("ann-pairs").querySelector("tbody");
   tbody.innerHTML = "";
-  const res = A.fit ? (A.model === "H" ? A.fit.residual_H : A.fit.residual_F) : [];
+  const same = A.fit && A.fit.residual_H.length === A.pairs.length;  // a fit of these pairs, not of earlier ones
+  const resH = same ? A.fit.residual_H : [], resF = same ? A.fit.residual_F : [];
   A.pairs.forEach((p, k) => {
     const tr = document.createElement("tr");
     if (k === A.selected) tr.className = "selected";
     const pt = (x, y) => (x === null ? "occluded" : `${fmt(x)}, ${fmt(y)}`);
-    for (const text of [String(k + 1), String(p.set), pt(p.x0, p.y0), pt(p.x1, p.y1), fmt(res[k], 2)]) {
+    for (const text of [String(k + 1), String(p.set), pt(p.x0, p.y0), pt(p.x1, p.y1), fmt(resH[k], 2),
+      fmt(resF[k], 2)]) {
       const td = document.createElement("td"); td.textContent = text; tr.append(td);
     }
     tr.addEventListener("click", () => { A.selected = k; renderPairsTable(); view.redraw(); });
@@ -135,7 +147,8 @@ const annotateHandler = {
   },
   click(pane, x, y) {
     const A = S.annot;
-    if (!insideImage(pane, x, y)) return;
+    if (!insideImage(pane, x, y)) return undefined;
+    if (!pairKey(A.images)) { showError("choose two images first"); return undefined; }
     if (A.pending && A.pending.pane !== pane) {
       remember();
       const p0 = A.pending.pane === 0 ? A.pending : { x, y }, p1 = A.pending.pane === 0 ? { x, y } : A.pending;
@@ -146,6 +159,7 @@ const annotateHandler = {
       A.pending = { pane, x, y };
     }
     annotationsChanged();
+    return () => { if (S.annot === A) undo(); };
   },
   hover(pane, x, y) {
     S.annot.cursor = { pane, x, y };
@@ -203,20 +217,25 @@ function newSet() {
 }
 
 async function saveAnnotation() {
-  if (!S.images[0] || !S.images[1]) throw new Error("choose two images first");
-  const body = { name: $("ann-name").value.trim(), model: S.annot.model, image0: S.images[0], image1: S.images[1],
-    pairs: S.annot.pairs, overwrite: $("ann-overwrite").checked };
+  const A = S.annot;  // saved with its own images, whatever is shown when the answer comes
+  if (!pairKey(A.images)) throw new Error("choose two images first");
+  A.name = $("ann-name").value.trim();
+  const body = { name: A.name, model: A.model, image0: A.images[0], image1: A.images[1], pairs: A.pairs,
+    overwrite: $("ann-overwrite").checked };
   const out = await api("/api/annotate/save", { method: "POST", json: body });
-  S.annot.saved = `saved (${out.kind}): ${out.files.join(", ")} in the annotation folder`;
-  $("ann-status").textContent = S.annot.saved;
+  A.saved = `saved (${out.kind}): ${out.files.join(", ")} in the annotation folder`;
+  A.dirty = false;
+  keepDraft(A);
+  if (A === S.annot) renderAnnotationStatus();
   await listSaved();
 }
 async function downloadAnnotation() {
-  const response = await api("/api/annotate/export", { method: "POST", json: { pairs: S.annot.pairs, model: S.annot.model }, raw: true });
+  const A = S.annot;
+  const response = await api("/api/annotate/export", { method: "POST", json: { pairs: A.pairs, model: A.model }, raw: true });
   const blob = await response.blob();
   const a = document.createElement("a");
   a.href = URL.createObjectURL(blob);
-  a.download = S.annot.model === "F" ? "corrs.txt" : `${$("ann-name").value.trim() || "pair"}_H12.txt`;
+  a.download = A.model === "F" ? "corrs.txt" : `${$("ann-name").value.trim() || "pair"}_H12.txt`;
   document.body.append(a); a.click(); a.remove();
 }
 async function listSaved() {
@@ -227,20 +246,35 @@ async function listSaved() {
   sel.append(new Option(data.annotations.length ? "— saved pairs —" : "(none saved yet)", ""));
   for (const a of data.annotations) sel.append(new Option(`${a.kind}: ${a.name}`, `annotations/${a.path}`));
 }
+// a pair name for a ground-truth file: its folder for a corrs.txt, the scene of a planar file, the sequence and
+// pair of an Oxford H1to<k>p, the pair of an EVD h/<name>.txt
+function annotationName(path) {
+  const parts = path.split("/"), file = parts[parts.length - 1], folder = parts[parts.length - 2] || "pair";
+  const oxford = file.match(/^H1to(\d+)p$/);
+  const name = file === "corrs.txt" ? folder : oxford ? `${folder}-1to${oxford[1]}`
+    : file.replace(/_H1\d+\.txt$/, "").replace(/\.txt$/, "");
+  return name.replace(/[^A-Za-z0-9_-]/g, "_").replace(/^[_-]+/, "").slice(0, 64) || "pair";
+}
 async function openAnnotation(value) {
   const at = value.indexOf("/");
   if (at < 1) throw new Error("write the file as FOLDER/path (a served folder's name, then the path in it)");
   const root = value.slice(0, at), path = value.slice(at + 1);
   const opened = await api(`/api/annotate/open?root=${encodeURIComponent(root)}&path=${encodeURIComponent(path)}`);
   if (!opened.image0 || !opened.image1) throw new Error("the annotation's images are not under the served folders");
+  if (!mayLeavePair([opened.image0, opened.image1])) return;
   await setImage(0, opened.image0);
   await setImage(1, opened.image1);
-  resetAnnotations();
-  S.annot.pairs = opened.pairs;
-  S.annot.set = Math.max(0, ...opened.pairs.map((p) => p.set));
-  S.annot.fixedH = opened.H;
-  const model = opened.kind === "planar" ? "H" : "F";
-  $(`model-${model}`).checked = true; S.annot.model = model;
-  $("ann-name").value = opened.kind === "planar" ? path.split("/").pop().replace(/_H1\d+\.txt$/, "") : path.split("/").slice(-2)[0];
+  const A = S.annot;
+  if (A.dirty && A.pairs.length && !window.confirm(`This pair has ${A.pairs.length} unsaved annotated pairs: `
+    + "replace them with the file's? (Undo brings them back.)")) return;
+  remember();
+  Object.assign(A, { pairs: opened.pairs, pending: null, selected: -1, fixedH: opened.H, saved: "",
+    set: Math.max(0, ...opened.pairs.map((p) => p.set)), model: opened.kind === "planar" ? "H" : "F",
+    name: annotationName(path) });
+  $(`model-${A.model}`).checked = true;
+  $("ann-name").value = A.name;
   annotationsChanged();
+  A.dirty = false;
+  keepDraft(A);
+  renderAnnotationStatus();
 }

@@ -11,7 +11,7 @@ function setTab(tab) {
   for (const name of ["match", "runs", "annotate"]) $(`panel-${name}`).hidden = name !== tab;
   view.handler = tab === "annotate" ? annotateHandler : matchHandler;
   $("result-section").hidden = tab === "annotate";
-  if (tab === "annotate") annotationsChanged();
+  if (tab === "annotate") annotationsChanged({ edited: false });
   view.redraw();
 }
 
@@ -35,7 +35,7 @@ async function start() {
   for (const r of S.info.choices.ransac) if (r !== "none") $("opt-ransac").append(new Option(r, r));
   $("opt-descriptor").append(new Option("(preset)", ""));
   for (const d of S.info.choices.descriptor) $("opt-descriptor").append(new Option(d, d));
-  setupPickers();
+  await setupPickers();
   for (const r of S.info.runs) $("run-select").append(new Option(r, r));
   $("run-select").addEventListener("change", guarded(() => loadRun($("run-select").value)));
   if (S.info.runs.length) loadRun(S.info.runs[0]).catch(showError);
@@ -48,13 +48,24 @@ async function start() {
   $("ann-occluded").addEventListener("click", markOccluded);
   $("ann-new-set").addEventListener("click", newSet);
   $("ann-clear").addEventListener("click", () => { remember(); S.annot.pairs = []; S.annot.pending = null; annotationsChanged(); });
-  for (const m of ["H", "F"]) $(`model-${m}`).addEventListener("change", () => { S.annot.model = m; annotationsChanged(); });
+  for (const m of ["H", "F"]) $(`model-${m}`).addEventListener("change", () => { S.annot.model = m; annotationsChanged({ edited: false }); });
+  $("ann-name").addEventListener("input", () => { S.annot.name = $("ann-name").value.trim(); keepDraft(S.annot); });
   $("ann-save").addEventListener("click", guarded(saveAnnotation));
   $("ann-download").addEventListener("click", guarded(downloadAnnotation));
   $("ann-open").addEventListener("click", guarded(() => openAnnotation($("ann-saved").value)));
   $("ann-open-file").addEventListener("click", guarded(() => openAnnotation($("ann-open-path").value.trim())));
   listSaved().catch(showError);
+  S.annot = annotationFor(S.images);
   setTab("match");
+  const last = lastPair();  // the pair shown before a reload, with its draft
+  if (last) {
+    try {
+      await setImage(0, last[0], true);
+      await setImage(1, last[1], true);
+    } catch (error) {
+      showError(`the pair shown last (${pairLabel(last)}) is not served any more: ${error.message}`);
+    }
+  }
   document.body.dataset.ready = "1";
 }
 
@@ -62,7 +73,7 @@ async function start() {
 window.slimeWeb = {
   S, view,
   screenOf(pane, x, y) { return view.toScreen(pane, x, y); },
-  busy() { return S.annot.fitting > 0 || view.pending; },
+  busy() { return S.fitting > 0 || view.pending; },
   measureFrames(n) {
     const times = [], saved = view.views.map((v) => ({ ...v }));
     for (let k = 0; k < n; k++) {

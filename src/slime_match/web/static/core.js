@@ -19,8 +19,9 @@ const S = {
   source: null,                  // where the matches came from: {job} or {run, index}
   stages: null, layers: {}, hover: null,  // hover: {layer, label} of the plane or set under the pointer
   job: null, polling: null,
-  annot: { pairs: [], pending: null, set: 0, selected: -1, history: [], fit: null, fixedH: null,
-    cursor: null, model: "H", epiline: null, reprojected: null, fitting: 0, saved: "" },
+  annotations: new Map(),        // each image pair's annotation, by pairKey (annotation-store.js)
+  annot: null,                   // the shown pair's annotation
+  fitting: 0,                    // annotation fits asked and not answered yet
   frameTimes: [],
 };
 
@@ -68,14 +69,17 @@ class PairView {
     this.handler = null;          // {grab, drag, drop, click, hover, leave}
     this.pending = false;
     this.drag = null;
+    this.clickUndo = null;        // {time, undo} of the last click: a double-click takes it back
     new ResizeObserver(() => this.resize()).observe(canvas);
     canvas.addEventListener("wheel", (e) => this.onWheel(e), { passive: false });
     canvas.addEventListener("mousedown", (e) => this.onDown(e));
     window.addEventListener("mousemove", (e) => this.onMove(e));
     window.addEventListener("mouseup", (e) => this.onUp(e));
     canvas.addEventListener("mouseleave", () => this.handler && this.handler.leave && this.handler.leave());
-    canvas.addEventListener("dblclick", (e) => {
+    canvas.addEventListener("dblclick", (e) => {  // fits the pane, and takes back the first click's effect
       const pane = this.paneAt(this.local(e)[0]);
+      if (this.clickUndo && performance.now() - this.clickUndo.time < 1000) this.clickUndo.undo();
+      this.clickUndo = null;
       if (pane >= 0) { this.fit(pane); this.redraw(); }
     });
   }
@@ -174,9 +178,10 @@ class PairView {
     if (!d) return;
     const [sx, sy] = this.local(e);
     if (d.grabbed) { if (this.handler.drop) this.handler.drop(d.moved); this.redraw(); return; }
-    if (!d.moved && this.handler && this.handler.click) {
+    if (!d.moved && this.handler && this.handler.click && e.detail <= 1) {  // a double-click's second: no click
       const [x, y] = this.toImage(d.pane, sx, sy);
-      this.handler.click(d.pane, x, y, sx, sy, e);
+      const undo = this.handler.click(d.pane, x, y, sx, sy, e);
+      this.clickUndo = typeof undo === "function" ? { time: performance.now(), undo } : null;
     }
   }
   redraw() {

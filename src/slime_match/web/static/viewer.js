@@ -74,7 +74,9 @@ function loadImage(side, ref) {
     const img = new Image();
     img.onload = () => {
       S.imgs[side] = img; S.images[side] = ref;
-      view.fit(side); view.redraw(); resolve(img);
+      view.fit(side); view.redraw();
+      showPairAnnotation();
+      resolve(img);
     };
     img.onerror = async () => {
       try { await api(imageUrl(ref)); } catch (error) { reject(error); return; }
@@ -110,28 +112,39 @@ function clearResults() {
   view.redraw();
 }
 
+// the pickers' folders and events; resolves when the first folder of each is listed
 function setupPickers() {
+  const listed = [];
   for (const side of [0, 1]) {
     const rootSel = $(`img${side}-root`);
     for (const f of S.info.folders) if (f.kind !== "annotations") rootSel.append(new Option(f.name, f.name));
     if (S.info.annotations) rootSel.append(new Option("annotations", "annotations"));
     rootSel.addEventListener("change", guarded(() => listImages(side, rootSel.value)));
-    $(`img${side}-path`).addEventListener("change", guarded(async () => {
-      const path = $(`img${side}-path`).value;
-      if (path) { await loadImage(side, { root: rootSel.value, path }); clearResults(); resetAnnotations(); }
+    const pathSel = $(`img${side}-path`);
+    pathSel.addEventListener("change", guarded(async () => {
+      const ref = { root: rootSel.value, path: pathSel.value }, images = [...S.images];
+      images[side] = ref;
+      if (!ref.path) return;
+      if (!mayLeavePair(images)) {  // back to the shown image
+        const shown = S.images[side];
+        if (shown) await setImage(side, shown, true); else pathSel.value = "";
+        return;
+      }
+      await loadImage(side, ref);
+      clearResults();
     }));
     $(`img${side}-upload`).addEventListener("change", guarded(async (e) => {
       const file = e.target.files[0];
-      if (!file) return;
+      if (!file || !mayLeavePair()) { e.target.value = ""; return; }
       const form = new FormData();
       form.append("file", file);
       const ref = await api("/api/upload", { method: "POST", body: form });
       e.target.value = "";
       await setImage(side, { root: ref.root, path: ref.path });
-      resetAnnotations();
     }));
-    if (rootSel.options.length) listImages(side, rootSel.value).catch(showError);
+    if (rootSel.options.length) listed.push(listImages(side, rootSel.value).catch(showError));
   }
+  return Promise.all(listed);
 }
 
 function showMatches(m, source, filesUrl) {
@@ -199,12 +212,17 @@ function renderStageTable() {
 function renderInfo(text) { $("info").textContent = text; }
 
 const matchHandler = {
-  click(pane, x, y) {
+  click(pane, x, y) {  // returns how to take the click back (a double-click fits the pane and selects nothing)
     const m = S.matches;
-    if (!m || !m.count) return;
+    if (!m || !m.count) return undefined;
+    const before = { selected: S.selected, info: $("info").textContent };
+    const undo = () => {
+      if (S.matches !== m) return;
+      S.selected = before.selected; renderInfo(before.info); view.redraw();
+    };
     const pts = pane === 0 ? m.keypoints0 : m.keypoints1;
     const k = nearest(pts, x, y, 10, view.views[pane].s);
-    if (k < 0) { S.selected = null; renderInfo(`${m.count} matches`); view.redraw(); return; }
+    if (k < 0) { S.selected = null; renderInfo(`${m.count} matches`); view.redraw(); return undo; }
     const [px, py] = pts[k];
     S.selected = [];
     pts.forEach((p, j) => { if (p[0] === px && p[1] === py) S.selected.push(j); });
@@ -217,6 +235,7 @@ const matchHandler = {
     renderInfo(`keypoint (${fmt(px)}, ${fmt(py)}) of image ${pane}: ${S.selected.length} match(es)\n` +
       lines.join("\n") + more);
     view.redraw();
+    return undo;
   },
   // over a match of the most refined labelled layer shown: its plane (or set) alone, with its homography
   hover(pane, x, y) {
@@ -279,13 +298,14 @@ async function loadRun(name) {
 async function openRunPair(name, index, tr) {
   const base = `/api/runs/${encodeURIComponent(name)}/pairs/${index}`;
   const m = await api(base);
+  if (!mayLeavePair(m.images)) return;
   for (const row of $("run-pairs").querySelectorAll("tr.selected")) row.classList.remove("selected");
   if (tr) tr.classList.add("selected");
   clearResults();
   if (m.images_missing) showError(m.images_missing);
   for (const side of [0, 1]) {
     if (m.images[side]) await setImage(side, m.images[side], true);
-    else { S.imgs[side] = null; S.images[side] = null; }
+    else { S.imgs[side] = null; S.images[side] = null; showPairAnnotation(); }
   }
   showMatches(m, { run: name, index }, `${base}/files/`);
   if (m.has_stages) await loadStages(`${base}/stages`);
