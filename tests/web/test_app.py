@@ -105,7 +105,7 @@ def test_images_listed_and_served_upright_as_png(client, web_images):
 
 @pytest.mark.parametrize("path, status", [
     ("../run/pairs.json", 403), ("../../../../../../etc/passwd", 403), ("/etc/passwd", 403),
-    ("sub/../../run/pairs.json", 403), ("nothere.png", 404), ("", 400), ("notes.txt", 400), ("fake.png", 400),
+    ("sub/../../run/pairs.json", 403), ("nothere.png", 404), ("", 400), ("notes.txt", 400), ("fake.png", 415),
 ])
 def test_image_paths_outside_or_bad_are_refused(client, path, status):
     answer = client.get("/api/image", params={"root": "images", "path": path})
@@ -258,7 +258,7 @@ def test_a_fault_of_the_server_is_answered_as_json(web_images, web_run, monkeypa
     def broken(folder):
         raise RuntimeError("disk on fire")
 
-    monkeypatch.setattr("slime_match.web.app.matches_payload", broken)
+    monkeypatch.setattr("slime_match.web.routes_runs.matches_payload", broken)
     with TestClient(create_app([web_images], [web_run]), raise_server_exceptions=False) as other:
         answer = other.get("/api/runs/run/pairs/0")
         assert answer.status_code == 500 and "disk on fire" in answer.json()["error"]
@@ -321,6 +321,8 @@ def test_missing_folders_stop_before_serving(tmp_path, capsys):
     assert "pairs.json" in capsys.readouterr().err
     assert main(["web", "--max-upload-mb", "0"]) == 2
     assert "upload limit" in capsys.readouterr().err
+    assert main(["web", "--max-megapixels", "0"]) == 2
+    assert "image limit" in capsys.readouterr().err
     (tmp_path / "file").write_text("")
     assert main(["web", "--annotations", str(tmp_path / "file")]) == 2
     assert "is a file" in capsys.readouterr().err
