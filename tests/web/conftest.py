@@ -146,5 +146,7 @@ def browser(server):
         options.add_argument(argument)
     driver = webdriver.Chrome(service=webdriver.ChromeService(DRIVER), options=options)
     driver.set_script_timeout(30)
+    width, height = driver.execute_script("return [innerWidth, innerHeight];")  # the window's own bars apart
+    driver.set_window_size(2 * 1400 - width, 2 * 900 - height)
     yield driver
     driver.quit()

@@ -50,6 +50,8 @@ def test_annotations_belong_to_their_pair_across_switches_reloads_and_saves(brow
     add_pairs(browser, [(60, 50), (330, 60), (200, 140)])
     first = annotated(browser)
     assert "unsaved" in browser.find_element("id", "ann-status").text
+    table = browser.execute_script("return document.getElementById('ann-pairs').getBoundingClientRect().bottom;")
+    assert table <= 900  # the pairs' table in view at 1400x900
 
     # a run's pair opened from the Runs tab: the page asks, then shows that pair with no annotation
     browser.find_element("id", "tab-runs").click()

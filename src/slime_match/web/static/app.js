@@ -31,17 +31,14 @@ async function start() {
   $("version").textContent = `slime-match ${S.info.version}`;
   for (const p of S.info.presets) $("preset").append(new Option(p, p));
   $("preset").value = "slime";
-  $("opt-ransac").append(new Option("(preset: none)", ""));
-  for (const r of S.info.choices.ransac) if (r !== "none") $("opt-ransac").append(new Option(r, r));
-  $("opt-descriptor").append(new Option("(preset)", ""));
-  for (const d of S.info.choices.descriptor) $("opt-descriptor").append(new Option(d, d));
+  buildOptions(S.info);
   await setupPickers();
   for (const r of S.info.runs) $("run-select").append(new Option(r, r));
   $("run-select").addEventListener("change", guarded(() => loadRun($("run-select").value)));
   if (S.info.runs.length) loadRun(S.info.runs[0]).catch(showError);
   for (const b of document.querySelectorAll(".tab")) b.addEventListener("click", () => setTab(b.dataset.tab));
   $("run").addEventListener("click", guarded(runMatch));
-  $("cancel").addEventListener("click", guarded(async () => { if (S.job) renderJob(await api(`/api/jobs/${S.job}/cancel`, { method: "POST" })); }));
+  $("cancel").addEventListener("click", guarded(() => S.job && cancelJob(S.job)));
   for (const id of ["max-lines", "show-matches", "show-outliers"]) $(id).addEventListener("input", () => view.redraw());
   $("ann-undo").addEventListener("click", undo);
   $("ann-delete").addEventListener("click", deleteSelected);
@@ -66,6 +63,7 @@ async function start() {
       showError(`the pair shown last (${pairLabel(last)}) is not served any more: ${error.message}`);
     }
   }
+  await reattach().catch(showError);
   document.body.dataset.ready = "1";
 }
 

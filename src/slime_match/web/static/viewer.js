@@ -106,9 +106,11 @@ async function setImage(side, ref, keepResults = false) {
   if (!keepResults) clearResults();
 }
 
+// no result on screen: matches, layers, counts, warnings, and the last job's progress unless one is followed
 function clearResults() {
   S.matches = null; S.selected = null; S.stages = null; S.layers = {}; S.hover = null; S.source = null;
-  $("result").hidden = true; renderLayers(); renderInfo("");
+  $("result").hidden = true; renderLayers(); renderStageTable(); renderInfo("");
+  if ($("cancel").disabled) { $("progress").innerHTML = ""; $("status").textContent = ""; }
   view.redraw();
 }
 
@@ -156,8 +158,16 @@ function showMatches(m, source, filesUrl) {
   $("match-seconds").textContent = m.seconds && m.seconds.total !== undefined ? `· ${fmt(m.seconds.total, 2)} s` : "";
   $("dl-npz").href = filesUrl + "matches.npz";
   $("dl-summary").href = filesUrl + "summary.json";
-  const warn = (m.warnings || []).length ? `\nwarnings: ${m.warnings.join("; ")}` : "";
-  renderInfo(`${m.count} matches${warn}\nclick a keypoint to see its match`);
+  const warnings = m.warnings || [];
+  $("warnings").hidden = !warnings.length;
+  $("warnings-summary").textContent = `${warnings.length} warning${warnings.length === 1 ? "" : "s"}`;
+  $("warnings-list").innerHTML = "";
+  for (const text of warnings) {
+    const li = document.createElement("li");
+    li.textContent = text;
+    $("warnings-list").append(li);
+  }
+  renderInfo(`${m.count} matches: click a keypoint to see its match`);
   renderStageTable();
   view.redraw();
 }
@@ -187,6 +197,7 @@ function renderLayers() {
     box2.addEventListener("change", () => { S.layers[name] = box2.checked; S.hover = null; view.redraw(); });
     const swatch = document.createElement("span");
     swatch.className = "swatch"; swatch.style.background = LAYER_COLORS[name];
+    label.title = `${name}: ${title} (${count})`;
     label.append(box2, " ", swatch, `${name}: ${title} (${count})`);
     box.append(label);
   }
@@ -197,7 +208,8 @@ function renderStageTable() {
   table.innerHTML = "";
   const seconds = (S.stages && S.stages.seconds) || (S.matches && S.matches.seconds) || {};
   const counts = (S.stages && S.stages.counts) || (S.matches && S.matches.counts) || {};
-  if (!Object.keys(seconds).length && !Object.keys(counts).length) return;
+  $("stage-box").hidden = !Object.keys(seconds).length && !Object.keys(counts).length;
+  if ($("stage-box").hidden) return;
   const row = (a, b, cls) => {
     const tr = document.createElement("tr");
     const td1 = document.createElement("td"), td2 = document.createElement("td");
