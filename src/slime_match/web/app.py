@@ -5,7 +5,7 @@ temporary folder of the server's own; matches run in a worker process (:mod:`.jo
 as ``{"error": message}`` (:mod:`.api_errors`), and none of them stops the server. POST requests must carry
 the header ``X-Slime-Web: 1``: a web page of another site cannot send it without the browser asking the
 server first (which it refuses), so such a page cannot make the server match or write. The routes are in
-``routes_images``, ``routes_jobs``, ``routes_runs`` and ``routes_annotate``.
+``routes_images``, ``routes_jobs``, ``routes_runs``, ``routes_annotate`` and ``routes_geometry``.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from .api_errors import add_error_handlers, answer
 from .folders import Root, Roots, unique_names
 from .image_checks import MAX_IMAGE_PIXELS
 from .routes_annotate import add_annotation_routes
+from .routes_geometry import add_geometry_routes
 from .routes_images import add_image_routes
 from .routes_jobs import add_job_routes
 from .routes_runs import add_run_routes
@@ -90,6 +91,7 @@ def create_app(images: list[str | os.PathLike] = (), runs: list[str | os.PathLik
     add_job_routes(app, state)
     add_run_routes(app, state)
     add_annotation_routes(app, state)
+    add_geometry_routes(app, state)
     _add_request_checks(app, state, allowed_hosts)
     return app
 

@@ -1,7 +1,7 @@
 // slime web: tabs, keys, the start, and the probe the browser tests use.
 "use strict";
 
-view.painters.push(paintLayers, paintMatches, paintAnnotations);
+view.painters.push(paintOverlay, paintLayers, paintMatches, paintAnnotations);
 
 // ---------------------------------------------------------------- tabs, keys, start
 
@@ -32,6 +32,7 @@ async function start() {
   for (const p of S.info.presets) $("preset").append(new Option(p, p));
   $("preset").value = "slime";
   buildOptions(S.info);
+  setupTools(S.info);
   await setupPickers();
   for (const r of S.info.runs) $("run-select").append(new Option(r, r));
   $("run-select").addEventListener("change", guarded(() => loadRun($("run-select").value)));

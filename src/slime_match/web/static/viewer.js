@@ -9,10 +9,12 @@ function paintMatches(ctx, v) {
   if (m && $("show-matches").checked && m.count) {
     const hasInliers = Array.isArray(m.inliers);
     const showOut = $("show-outliers").checked;
-    const colorOf = hasInliers ? (k) => (m.inliers[k] ? "#22c55e" : "#ef4444")
-      : (k) => PALETTE[Math.floor(m.keypoints0[k][1] / 24) % PALETTE.length];
-    paintPairs(ctx, v, m.keypoints0, m.keypoints1, colorOf,
-      { keep: hasInliers && !showOut ? (k) => m.inliers[k] : undefined, record: true });
+    // by ground-truth error when asked (tools.js), else inliers and outliers, else by height
+    const colorOf = groundTruthColorOf(m) || (hasInliers ? (k) => (m.inliers[k] ? "#22c55e" : "#ef4444")
+      : (k) => PALETTE[Math.floor(m.keypoints0[k][1] / 24) % PALETTE.length]);
+    const confident = confidenceFilter(m), inlier = hasInliers && !showOut ? (k) => m.inliers[k] : null;
+    const keep = confident && inlier ? (k) => confident(k) && inlier(k) : confident || inlier || undefined;
+    paintPairs(ctx, v, m.keypoints0, m.keypoints1, colorOf, { keep, record: true });
   }
   if (m && S.selected && S.selected.length && $("show-matches").checked) {
     const ks = S.selected;
@@ -109,6 +111,7 @@ async function setImage(side, ref, keepResults = false) {
 // no result on screen: matches, layers, counts, warnings, and the last job's progress unless one is followed
 function clearResults() {
   S.matches = null; S.selected = null; S.stages = null; S.layers = {}; S.hover = null; S.source = null;
+  S.overlay = null; S.gtErrors = null; $("overlay").value = ""; $("gt-color").checked = false; $("gt-summary").textContent = "";
   $("result").hidden = true; renderLayers(); renderStageTable(); renderInfo("");
   if ($("cancel").disabled) { $("progress").innerHTML = ""; $("status").textContent = ""; }
   view.redraw();
