@@ -14,6 +14,7 @@ pytest.importorskip("uvicorn", reason="slime web needs the web extra (uvicorn)")
 pytest.importorskip("selenium.webdriver", reason="the browser tests need selenium (the test extra)")
 from selenium.common.exceptions import NoAlertPresentException
 from selenium.webdriver.common.actions.action_builder import ActionBuilder
+from selenium.webdriver.support.ui import Select
 
 from .browser_steps import answer_confirm, needs_browser, open_page, pick, pointer, settle, until
 from .conftest import PLANAR_H
@@ -36,7 +37,7 @@ def add_pairs(browser, points, first: int = 0) -> None:
 
 def no_question(browser) -> bool:
     try:
-        browser.switch_to.alert
+        browser.switch_to.alert.text  # noqa: B018  (raises when the page asks nothing)
     except NoAlertPresentException:
         return True
     return False
@@ -79,8 +80,6 @@ def test_annotations_belong_to_their_pair_across_switches_reloads_and_saves(brow
     browser.save_screenshot(str(shots / "annotate-draft-restored.png"))
 
     # leaving it asks; answering no keeps the pair and its points
-    from selenium.webdriver.support.ui import Select
-
     Select(browser.find_element("id", "img1-path")).select_by_value("right.png")
     assert "unsaved" in answer_confirm(browser, accept=False)
     until(lambda: browser.find_element("id", "img1-path").get_attribute("value") == "plane1.png", 10,
