@@ -125,3 +125,23 @@ def test_one_job_per_click_a_job_list_and_no_server_path_in_a_failure(client, we
                                                            "request": "click-2"}).json()
     assert [job["id"] for job in client.get("/api/jobs").json()["jobs"]] == [second["id"], first["id"]]
     assert client.post(f"/api/jobs/{second['id']}/cancel", headers=POST).json()["status"] == "cancelled"
+
+
+def test_the_worker_s_warnings_reach_the_running_job_as_notices():
+    import logging
+    import queue
+
+    from slime_match.web.jobs import NoticeHandler
+
+    events, current = queue.Queue(), {"job": None}
+    handler = NoticeHandler(events, current)
+    logger = logging.getLogger("slime_match")
+    logger.addHandler(handler)
+    try:
+        logger.warning("before any job")
+        current["job"] = "j1"
+        logger.info("not a warning")
+        logger.warning("numba is compiling slime-match's loops")
+    finally:
+        logger.removeHandler(handler)
+    assert events.get_nowait() == ("notice", "j1", "numba is compiling slime-match's loops") and events.empty()

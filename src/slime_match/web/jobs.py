@@ -253,7 +253,7 @@ def _worker_main(tasks, events) -> None:
     from ..runs.outputs import write_pair_outputs
 
     current = {"job": None}
-    logging.getLogger("slime_match").addHandler(_NoticeHandler(events, current))
+    logging.getLogger("slime_match").addHandler(NoticeHandler(events, current))
     matcher, matcher_key = None, None
     while True:
         task = tasks.get()
@@ -289,7 +289,7 @@ def _worker_main(tasks, events) -> None:
             events.put(("failed", job_id, f"{type(error).__name__}: {error}"))
 
 
-class _NoticeHandler(logging.Handler):
+class NoticeHandler(logging.Handler):
     """Sends the worker's warnings to the job that runs (``current["job"]``) as notices."""
 
     def __init__(self, events, current: dict[str, str | None]) -> None:
