@@ -10,7 +10,7 @@ function setTab(tab) {
   for (const b of document.querySelectorAll(".tab")) b.classList.toggle("active", b.dataset.tab === tab);
   for (const name of ["match", "runs", "annotate"]) $(`panel-${name}`).hidden = name !== tab;
   view.handler = tab === "annotate" ? annotateHandler : matchHandler;
-  $("result-section").hidden = tab === "annotate";
+  $("result-section").hidden = $("display-section").hidden = tab === "annotate";
   if (tab === "annotate") annotationsChanged({ edited: false });
   view.redraw();
 }
