@@ -145,3 +145,15 @@ def test_the_worker_s_warnings_reach_the_running_job_as_notices():
     finally:
         logger.removeHandler(handler)
     assert events.get_nowait() == ("notice", "j1", "numba is compiling slime-match's loops") and events.empty()
+
+
+def test_the_page_offers_the_match_options_of_the_command_line(client):
+    from slime_match.choices import MATCH_OPTIONS
+    from slime_match.cli.commands import build_parser
+
+    args = build_parser().parse_args(["match", "a.png", "b.png", "-o", "out"])
+    for key in MATCH_OPTIONS:  # each one a `slime match` option too
+        assert hasattr(args, "slime_workers" if key == "workers" else key), key
+    info = client.get("/api/info").json()
+    assert info["options"] == list(MATCH_OPTIONS) and info["choices"]["views"] == ["off", "auto", "always"]
+    assert info["max_workers"] == server_cpus() and isinstance(info["cuda"], bool)

@@ -1,32 +1,13 @@
-"""The options a page may give a match: the names and choices of ``choices.py``, the ones ``slime match``
-takes, so that a new method or option reaches the page's menus at once; and the configuration they build,
+"""The options a page may give a match: ``choices.MATCH_OPTIONS``, the names and choices ``slime match`` takes
+too, so that a new method or option reaches the page's menus at once; and the configuration they build,
 refused (400) where this server cannot run it (CUDA absent, more workers than its CPUs)."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from ..choices import (
-    BUILTIN_BASES,
-    DESCRIPTOR_CHOICES,
-    DETECTIONS,
-    DEVICES,
-    ORIENTATION_CHOICES,
-    RANSAC_CHOICES,
-    SHAPE_METHODS,
-    TILE_TESTS,
-    VIEW_MODES,
-)
+from ..choices import MATCH_OPTIONS
 from .api_errors import ApiError
-
-# the options the page may set (flat names of make_config) and their choices (None: a value read by the
-# option's type); paths such as weights_dir stay the server's
-PAGE_OPTIONS: dict[str, tuple[str, ...] | None] = {
-    "base": BUILTIN_BASES, "descriptor": DESCRIPTOR_CHOICES, "shape": SHAPE_METHODS,
-    "orientation": ORIENTATION_CHOICES, "upright": None, "ransac": RANSAC_CHOICES, "threshold": None,
-    "seed": None, "device": DEVICES, "min_side": None, "max_side": None, "scales": None, "detection": DETECTIONS,
-    "tile_test": TILE_TESTS, "magnification": None, "views": VIEW_MODES, "workers": None,
-}
 
 
 def server_cpus() -> int:
@@ -44,8 +25,8 @@ def cuda_available() -> bool:
 
 def match_choices() -> dict[str, Any]:
     """What ``/api/info`` tells the page about the options: their choices, the largest ``workers``, CUDA."""
-    return {"choices": {key: list(values) for key, values in PAGE_OPTIONS.items() if values is not None},
-            "options": list(PAGE_OPTIONS), "max_workers": server_cpus(), "cuda": cuda_available()}
+    return {"choices": {key: list(values) for key, values in MATCH_OPTIONS.items() if values is not None},
+            "options": list(MATCH_OPTIONS), "max_workers": server_cpus(), "cuda": cuda_available()}
 
 
 def match_config(preset: Any, options: Any, settings: Any, save_stages: bool):
@@ -57,10 +38,10 @@ def match_config(preset: Any, options: Any, settings: Any, save_stages: bool):
         raise ApiError("preset must be a preset name")
     if not isinstance(options, dict) or not isinstance(settings, dict):
         raise ApiError("options and settings must be JSON objects")
-    unknown = sorted(set(options) - set(PAGE_OPTIONS))
+    unknown = sorted(set(options) - set(MATCH_OPTIONS))  # paths such as weights_dir stay the server's
     if unknown:
         raise ApiError(f"unknown or refused option(s) {', '.join(unknown)}: the page may set "
-                       f"{', '.join(PAGE_OPTIONS)} and settings by dotted path")
+                       f"{', '.join(MATCH_OPTIONS)} and settings by dotted path")
     refused = [key for key in settings if not isinstance(key, str) or "weights_dir" in key]
     if refused:
         raise ApiError(f"setting(s) {', '.join(map(str, refused))} may not be set from the page")
