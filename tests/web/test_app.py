@@ -82,7 +82,8 @@ def test_page_and_static_files(client):
     page = client.get("/")
     assert page.status_code == 200 and "<canvas" in page.text and "/static/app.js" in page.text
     assert "http://" not in page.text and "https://" not in page.text  # nothing from the network
-    for name in ("core.js", "viewer.js", "jobs.js", "annotate.js", "app.js", "style.css"):
+    for name in ("core.js", "viewer.js", "jobs.js", "tools.js", "annotation-store.js", "annotate.js", "app.js",
+                 "style.css"):
         assert client.get(f"/static/{name}").status_code == 200
     assert client.get("/static/../app.py").status_code == 404
 

@@ -1,7 +1,8 @@
 // slime web: the page's core. Plain JavaScript, no dependencies, in classic scripts that share the page's
-// global scope (core.js, viewer.js, jobs.js, annotate.js, app.js, loaded in that order): one canvas shows the
-// two images side by side, each with its own zoom and pan; matches, Slime's stage layers and annotations are
-// drawn over them. This file: the state, requests and messages, the pair view and the drawing helpers.
+// global scope (core.js, viewer.js, jobs.js, tools.js, annotation-store.js, annotate.js, app.js, loaded in that
+// order): one canvas shows the two images side by side, each with its own zoom and pan; matches, Slime's
+// stage layers and annotations are drawn over them. This file: the state, requests and messages, the pair
+// view and the drawing helpers.
 "use strict";
 const $ = (id) => document.getElementById(id);
 const PALETTE = ["#e6194b", "#3cb44b", "#ffe119", "#4363d8", "#f58231", "#911eb4", "#46f0f0", "#f032e6",
