@@ -250,7 +250,7 @@ def cmd_hloc(args: argparse.Namespace) -> int:
 def cmd_web(args: argparse.Namespace) -> int:
     from ..web import serve  # FastAPI and uvicorn load only here
 
-    serve(args.host, args.port, args.images, args.run, args.annotations, args.max_upload_mb)
+    serve(args.host, args.port, args.images, args.run, args.annotations, args.max_upload_mb, args.max_megapixels)
     return 0
 
 
@@ -379,6 +379,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "(DIR/wxbs/<name>/, DIR/planar/); without it, annotations are downloaded")
     web.add_argument("--max-upload-mb", type=float, default=None, metavar="MB",
                      help="largest image upload accepted (default 25)")
+    web.add_argument("--max-megapixels", type=float, default=None, metavar="MP",
+                     help="largest image taken, read from its header before decoding (default 40)")
     web.set_defaults(func=cmd_web)
 
     from ..eval.bench_args import add_bench_parser
