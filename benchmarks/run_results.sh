@@ -1,32 +1,33 @@
 #!/usr/bin/env bash
 # Produces docs/results.md: every method of the registry on the planar data (graf, the two HPatches
 # sequences, each pair also rotated by 90/180/270 deg = non-upright pairs) and the non-planar data
-# (the 15 ScanNet sample pairs with pose AUC, the Middlebury motorcycle stereo pair), with times.
+# (the 15 ScanNet sample pairs with pose AUC, the Middlebury motorcycle stereo pair), with times; then the
+# hard sets (EVD and WxBS) scored by their own protocols (OpenCV MAGSAC++ on the raw matches).
 #
 #   benchmarks/run_results.sh [extra slime-bench options, e.g. --device cuda]
 #
-# Slow on a CPU (Slime and Slimed Key.Net take up to about a minute per pair); resumable: predictions are
-# cached in $OUT/predictions, so an interrupted run continues where it stopped and a rerun only recomputes
-# metrics (about 10 min for the whole cache here).
-# Environment: OUT (results folder, default results/full), DESCRIPTOR (Hz+/Slime/Key.Net descriptor: tfeat where
-# HardNet's weights are absent, as on the project machines; auto elsewhere), METHODS (';'-separated method
-# specs, default: the paper's set and OpenCV SIFT; the registry's slime-fast, loftr and the learned bases
-# (aliked-lg, disk-lg, xfeat-lg and their -nn variants) are left out: add them with
-# METHODS="...;loftr;aliked-lg", their weights in TORCH_HOME, see scripts/fetch_learned_weights.py),
-# TORCH_HOME (kornia weights).
+# Slow on a CPU (about 1.5 hours on 2 cores: Slime and Slimed Key.Net take 10-50 s per pair); resumable:
+# predictions are cached in $OUT/predictions and $OUT_HARD/predictions, so an interrupted run continues where
+# it stopped and a rerun only recomputes metrics. Every method runs at its default settings (the descriptor
+# `auto` takes the best network whose weights are present and the report names it); the main table gives
+# each method at its best post-processing RANSAC threshold, stated in its column.
+# Environment: OUT (results folder, default results/full), OUT_HARD (default results/hard), METHODS and
+# HARD_METHODS (';'-separated method specs; the learned bases, e.g. aliked-lg, need their weights in
+# TORCH_HOME: scripts/fetch_learned_weights.py), DATA (data folder, default $SLIME_MATCH_DATA or ../shared/data),
+# TORCH_HOME (network weights).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [[ -z "${TORCH_HOME:-}" && -d ../shared/weights ]]; then
   export TORCH_HOME="$(cd ../shared/weights && pwd)"
 fi
+DATA="${DATA:-${SLIME_MATCH_DATA:-../shared/data}}"
 OUT="${OUT:-results/full}"
-[[ -n "${METHODS:-}" ]] && METHODS_NOTE=", METHODS=$METHODS"
-D="${DESCRIPTOR:-tfeat}"
-ALL="rootsift;rootsift-upright;slime-rootsift;keynet:descriptor=$D;keynet-upright:descriptor=$D"
-ALL="$ALL;slime-keynet:descriptor=$D;slime-keynet-upright:descriptor=$D;hz+:descriptor=$D;hz+-upright:descriptor=$D"
-METHODS="${METHODS:-$ALL;slime:descriptor=$D;slime-upright:descriptor=$D;opencv-sift}"
-CMD=(python -m slime_match.eval.bench graf hpatches scannet-sample motorcycle --rotations 90,180,270
-     --thresholds none,5,3,2,1 --seed 0 --methods "$METHODS" -o "$OUT" "$@")
-"${CMD[@]}"
-python -m slime_match.eval.report "$OUT" --doc docs/results.md \
-  --command "benchmarks/run_results.sh $* (DESCRIPTOR=$D${METHODS_NOTE:-})"
+OUT_HARD="${OUT_HARD:-results/hard}"
+METHODS="${METHODS:-slime;slime-upright;hz+;slime-keynet;keynet;slime-rootsift;rootsift;opencv-sift}"
+HARD_METHODS="${HARD_METHODS:-slime;slime:views=off;hz+;asift;opencv-sift:rootsift=true,mutual=true}"
+python -m slime_match.eval.bench graf hpatches scannet-sample motorcycle --data-root "$DATA" \
+    --rotations 90,180,270 --thresholds none,5,3,2,1 --seed 0 --methods "$METHODS" -o "$OUT" "$@"
+python -m slime_match.eval.bench "evd:$DATA/hard/evd" "wxbs:$DATA/hard/wxbs" --thresholds none --map-pairs 0 \
+    --seed 0 --methods "$HARD_METHODS" -o "$OUT_HARD" "$@"
+python -m slime_match.eval.report "$OUT" --extra "$OUT_HARD" --doc docs/results.md \
+  --command "benchmarks/run_results.sh $*"

@@ -8,6 +8,7 @@ import pytest
 from conftest import run_cli
 
 import slime_match.matcher
+import slime_match.viz
 from slime_match.cli import main
 from slime_match.config import make_config
 from slime_match.errors import caused_by_interrupt
@@ -52,7 +53,7 @@ def test_hz_plus_weight_free(pair, tmp_path, capsys):
     assert summary["counts"]["matches"] > 50
 
 
-def test_slime_stages_and_viz(pair, tmp_path, capsys):
+def test_slime_stages_viz_and_reruns_into_the_same_folders(pair, tmp_path, capsys):
     # at its own size (--min-side none): the stages' points, in original px, are then the global DTM's own
     code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, *WEIGHT_FREE, "--save-stages", "--no-plot",
                            "--min-side", "none")
@@ -69,6 +70,30 @@ def test_slime_stages_and_viz(pair, tmp_path, capsys):
     assert code == 0, err
     assert {p.name for p in (tmp_path / "viz").iterdir()} == {
         f"{s}.png" for s in ("blocks", "tiles", "planes", "superset", "fbar", "ftheta", "tile_matches", "final")}
+
+    (tmp_path / "viz" / "notes.txt").write_text("mine")
+    code, _out, err = run_cli(capsys, "viz", tmp_path / "stages.npz", *pair, "-o", tmp_path / "viz", "--stage",
+                              "final")
+    assert code == 0, err
+    assert {p.name for p in (tmp_path / "viz").iterdir()} == {"final.png", "notes.txt"}  # no earlier picture
+
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift", "--no-plot")
+    assert code == 0, err  # an earlier run's stages.npz goes; other files stay
+    assert {p.name for p in tmp_path.iterdir()} == {"matches.npz", "summary.json", "viz"}
+
+
+def test_an_interrupted_match_leaves_the_earlier_result_intact(pair, tmp_path, capsys, monkeypatch):
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift")
+    assert code == 0, err
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(slime_match.viz, "plot_matches", interrupted)
+    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path, "--method", "rootsift", "--ransac", "homography")
+    assert code == 130 and err.splitlines()[-1] == "interrupted"
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
 
 
 def test_slime_detection_option(pair, tmp_path, capsys):
@@ -137,10 +162,13 @@ def test_set_any_option_and_rerun_a_recorded_configuration(pair, tmp_path, capsy
     (["--set", "slime.tiles.nope=1"], "unknown option 'slime.tiles.nope'"),
     (["--set", "slime.tiles.t_xi=many"], "cannot read 'many' as float"),
     (["--config", "missing.json"], "cannot read a configuration from missing.json"),
+    (["--method", "hz+", "--set", "views.min_support=50"], "'views.min_support' is the threshold of Slime"),
+    (["--views", "off", "--set", "views.tilts=2"], "'views.tilts' sets the simulated views, and they are off"),
 ])
 def test_bad_settings_and_configs_are_one_line_errors(pair, tmp_path, capsys, options, message):
     code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "out", *options)
     assert code == 2 and message in err and not (tmp_path / "out").exists()
+    assert len(err.strip().splitlines()) == 1
 
 
 def test_a_setting_without_a_value_is_a_usage_error(pair, tmp_path, capsys):
@@ -336,8 +364,12 @@ def test_output_folder_that_is_a_file_is_refused_up_front(tmp_path, capsys, pair
 
 
 def test_demo_scores_the_real_pair(tmp_path, capsys):
+    (tmp_path / "stages.npz").write_bytes(b"an earlier run's")
+    (tmp_path / "notes.txt").write_text("mine")
     code, out, err = run_cli(capsys, "demo", "-o", tmp_path, "--method", "rootsift")
     assert code == 0, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "matches.npz", "matches.png", "motorcycle_left.png", "motorcycle_right.png", "notes.txt", "summary.json"]
     gt = json.loads((tmp_path / "summary.json").read_text())["ground_truth"]
     assert gt["precision"] > 0.8 and "precision" in out
 

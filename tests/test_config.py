@@ -83,6 +83,29 @@ def test_dotted_slime_options_are_refused_for_a_base_alone():
         sm.make_config("rootsift", **{"base.blob.shortlist_k": 3})
 
 
+@pytest.mark.parametrize(("preset", "options", "message"), [
+    ("hz+", {"views.min_support": 50}, r"'views.min_support' is the threshold of Slime .* set views.min_inliers"),
+    ("slime", {"views.min_inliers": 20}, r"'views.min_inliers' is the threshold of a base pipeline alone .*"),
+    ("hz+", {"views": "off", "views.tilts": (2.0,)}, "'views.tilts' sets the simulated views, and they are off"),
+    ("slime", {"views": "off", "views.min_support": 50}, "they are off"),
+    ("slime", {"views": "always", "views.min_support": 50}, "the mode is 'always', which adds them all"),
+    ("rootsift", {"views": "always", "views.min_inliers": 20}, "the mode is 'always'"),
+])
+def test_view_options_the_run_would_not_read_are_refused(preset, options, message):
+    with pytest.raises(sm.ConfigError, match=message) as info:
+        sm.make_config(preset, **options)
+    assert "\n" not in str(info.value)
+
+
+def test_view_options_the_run_reads_are_accepted():
+    assert sm.make_config("hz+", views="always", **{"views.tilts": "2"}).views.tilts == (2.0,)  # the base's views
+    assert sm.make_config("hz+", **{"views.min_inliers": 30}).views.min_inliers == 30
+    assert sm.make_config("slime", **{"views.min_support": 80}).views.min_support == 80
+    assert sm.make_config("slime", views="off").views.mode == "off"
+    recorded = sm.make_config("slime", views="off")  # options of a recorded configuration are not re-judged
+    assert with_options(recorded, views="auto", **{"views.min_support": 90}).views.min_support == 90
+
+
 def test_a_summary_reads_back_to_the_same_configuration(tmp_path):
     config = sm.make_config("slime-rootsift", scales=(1, 2), workers=1, **{"slime.tiles.t_xi": 12})
     summary = {"method": "slime", "config": json.loads(json.dumps(config.to_dict())), "counts": {}}

@@ -31,6 +31,15 @@ DETECTIONS = ("scale", "block", "merged")  # how Slime's blocks get keypoints (s
 TILE_TESTS = ("plane", "flow")  # Sec. 3.8's test of tile matches; "flow" is the paper's, "plane" the default
 VIEW_MODES = ("off", "auto", "always")  # simulated views of image 0 (views.ViewConfig)
 
+# the flat options of one match (make_config's names) that the command line and the web app both offer, with
+# their choices (None: a value read by the option's type); the command line also takes method and weights_dir
+MATCH_OPTIONS = {
+    "base": BUILTIN_BASES, "descriptor": DESCRIPTOR_CHOICES, "shape": SHAPE_METHODS,
+    "orientation": ORIENTATION_CHOICES, "upright": None, "ransac": RANSAC_CHOICES, "threshold": None,
+    "seed": None, "device": DEVICES, "min_side": None, "max_side": None, "scales": None, "detection": DETECTIONS,
+    "tile_test": TILE_TESTS, "magnification": None, "views": VIEW_MODES, "workers": None,
+}
+
 BATCH_BACKENDS = ("local", "ray")  # where `slime pairs` matches its pairs (runs.batch)
 
 CAMERA_MODES = ("auto", "single", "per-folder", "per-image")  # COLMAP camera sharing (runs.colmap)

@@ -196,7 +196,8 @@ def make_config(preset: str = "slime", **options: Any) -> MatchConfig:
     given a dataclass replaces that whole part. None values are skipped. Unknown options raise ConfigError,
     and so do options the method would not read: Slime's options for a base pipeline run alone, a base
     pipeline's options for another base (``shape`` for RootSIFT), a ``threshold`` without a post-processing
-    RANSAC.
+    RANSAC, a ``views.*`` option with the views off, the criterion of "auto" views under "always", or the other
+    kind of method's criterion (``views.min_support`` is Slime's, ``views.min_inliers`` a base pipeline's).
     """
     if not isinstance(preset, str) or (preset not in PRESETS and preset not in base_names()):
         raise ConfigError(f"unknown method/preset {preset!r}: choose one of {', '.join(PRESETS)}")
@@ -247,3 +248,31 @@ def _refuse_unread(config: MatchConfig, given: dict[str, Any]) -> None:
         if group == "base" and rest and rest.split(".")[0] not in read | {"name"}:
             raise ConfigError(f"the {config.base.name} base pipeline does not use {key!r} (it reads "
                               f"{', '.join(sorted(read))})")
+        if group == "views" and rest != "mode":
+            _refuse_unread_view_option(config, key, rest)
+
+
+# the view options read only in mode "auto", by Slime or by a base pipeline alone: what each criterion counts
+VIEW_CRITERIA = {"min_support": ("slime", "matches of F^theta, the planes Slime's epipolar vote keeps"),
+                 "min_inliers": ("base", "matches consistent with one fundamental matrix")}
+
+
+def _refuse_unread_view_option(config: MatchConfig, key: str, name: str) -> None:
+    """Raise ConfigError for a ``views.*`` option (other than the mode) that the run would not read: any with
+    the views off, a criterion of "auto" under "always", or the other kind of method's criterion."""
+    mode = config.views.mode
+    if mode == "off":
+        raise ConfigError(f"{key!r} sets the simulated views, and they are off: drop it or turn the views on "
+                          "(views=auto|always, --views)")
+    if name not in VIEW_CRITERIA:
+        return
+    reader, counted = VIEW_CRITERIA[name]
+    other = next(n for n in VIEW_CRITERIA if n != name)
+    if (reader == "slime") != (config.method == "slime"):
+        runs = "Slime" if config.method == "slime" else f"the {config.method} pipeline alone"
+        raise ConfigError(f"{key!r} is the threshold of {'Slime' if reader == 'slime' else 'a base pipeline alone'} "
+                          f"for adding views ({counted}), but method {config.method!r} runs {runs}: set views.{other} "
+                          "instead")
+    if mode != "auto":
+        raise ConfigError(f"{key!r} decides when views mode 'auto' adds views, and the mode is {mode!r}, which "
+                          "adds them all: drop it or use views=auto")

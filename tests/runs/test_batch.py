@@ -61,7 +61,7 @@ def test_read_pairs_errors(images, tmp_path, text, error, words):
         read_pairs(tmp_path / "absent.txt", images)
 
 
-def test_pairs_run_resume_failures_and_config_guard(images, tmp_path, capsys):
+def test_pairs_run_resume_failures_and_config_guard(images, tmp_path, capsys, caplog):
     pairs = _pairs_file(tmp_path, "left.png right.png\nright.png left.png\nleft.png broken.png\n")
     out = tmp_path / "run"
     code, stdout, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST)
@@ -86,11 +86,41 @@ def test_pairs_run_resume_failures_and_config_guard(images, tmp_path, capsys):
     assert code == 2 and "another configuration" in err and "base.upright" in err
 
     good = _pairs_file(tmp_path, "left.png right.png\n")
+    (out / "right.png__left.png" / "notes.txt").write_text("mine")
+    caplog.clear()
     code, stdout, _ = run_cli(capsys, "pairs", good, "--images", images, "-o", out, *FAST, "--upright",
-                           "--overwrite", "--plot")
+                              "--overwrite", "--plot")
     assert code == 0 and "1 matched, 0 already done, 0 failed" in stdout
     assert (out / "left.png__right.png" / "matches.png").is_file()
     assert json.loads((out / "run.json").read_text())["config"]["base"]["upright"] is True
+    # the pairs of the earlier configuration that this pairs file does not list go, a user's file stays
+    assert "removed 2 pair(s) of the earlier configuration" in caplog.text
+    assert sorted(p.name for p in (out / "records").iterdir()) == ["left.png__right.png.json"]
+    assert [p.name for p in (out / "right.png__left.png").iterdir()] == ["notes.txt"]
+    assert not (out / "left.png__broken.png").exists()
+    caplog.clear()
+    other = tmp_path / "other.txt"
+    other.write_text("right.png left.png\n")
+    code, stdout, _ = run_cli(capsys, "pairs", other, "--images", images, "-o", out, *FAST, "--upright",
+                              "--overwrite")  # the same configuration: nothing removed
+    assert code == 0 and "removed" not in caplog.text and "1 matched, 0 already done, 0 failed" in stdout
+    assert (out / "left.png__right.png" / "matches.npz").is_file()
+
+
+def test_a_rerun_leaves_only_its_own_files_in_a_pair_folder(images, tmp_path, capsys):
+    pairs = _pairs_file(tmp_path, "left.png right.png\n")
+    out, folder = tmp_path / "run", tmp_path / "run" / "left.png__right.png"
+    code, _, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST, "--plot")
+    assert code == 0, err
+    (folder / "notes.txt").write_text("mine")
+    code, _, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST, "--overwrite")
+    assert code == 0, err
+    assert sorted(p.name for p in folder.iterdir()) == ["matches.npz", "notes.txt", "summary.json"]
+    (images / "left.png").write_bytes(b"\x89PNG not really")  # the pair now fails: its earlier files go
+    code, _, err = run_cli(capsys, "pairs", pairs, "--images", images, "-o", out, *FAST, "--overwrite")
+    assert code == 1, err
+    assert sorted(p.name for p in folder.iterdir()) == ["notes.txt"]
+    assert json.loads((out / "pairs.json").read_text())["pairs"][0]["status"] == "failed"
 
 
 def test_pairs_bad_input_fails_before_any_work(images, tmp_path, capsys):

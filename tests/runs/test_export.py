@@ -70,19 +70,23 @@ def test_check_images(tmp_path, small_images):
 
 
 def test_export_folder_checks(tmp_path):
-    out = tmp_path / "out"
-    check_export_folder(out, "marker.db", "COLMAP", overwrite=False)  # absent: fine
+    out, own = tmp_path / "out", ("marker.db", "sparse")
+    check_export_folder(out, own, "COLMAP", overwrite=False)  # absent: fine
     out.mkdir()
-    check_export_folder(out, "marker.db", "COLMAP", overwrite=False)  # empty: fine
+    check_export_folder(out, own, "COLMAP", overwrite=False)  # empty: fine
     (out / "notes.txt").write_text("mine")
     with pytest.raises(ConfigError, match="holds no COLMAP export"):
-        check_export_folder(out, "marker.db", "COLMAP", overwrite=True)
+        check_export_folder(out, own, "COLMAP", overwrite=True)
     (out / "marker.db").write_text("")
+    (out / "sparse").mkdir()
     with pytest.raises(ConfigError, match="earlier COLMAP export: use --overwrite"):
-        check_export_folder(out, "marker.db", "COLMAP", overwrite=False)
-    check_export_folder(out, "marker.db", "COLMAP", overwrite=True)
+        check_export_folder(out, own, "COLMAP", overwrite=False)
+    with pytest.raises(ConfigError, match=r"not part of a COLMAP export \(notes.txt\), which --overwrite would "):
+        check_export_folder(out, own, "COLMAP", overwrite=True)  # a user's file is never deleted with it
     with pytest.raises(ConfigError, match="is a file"):
-        check_export_folder(out / "notes.txt", "marker.db", "COLMAP", overwrite=True)
+        check_export_folder(out / "notes.txt", own, "COLMAP", overwrite=True)
+    (out / "notes.txt").unlink()
+    check_export_folder(out, own, "COLMAP", overwrite=True)
 
 
 def test_staged_folder_is_all_or_nothing(tmp_path):

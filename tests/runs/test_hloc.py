@@ -76,6 +76,11 @@ def test_export_refusals(tmp_path, small_images, monkeypatch):
     export_hloc(run, small_images, out, overwrite=True, merge_radius=0)
     with h5py.File(out / "features.h5", "r") as h5:
         assert len(h5["a.png"]["keypoints"]) == 5  # the rewrite took merge_radius 0
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(ConfigError, match=r"not part of a hloc export \(notes.txt\)"):
+        export_hloc(run, small_images, out, overwrite=True)
+    assert (out / "notes.txt").read_text() == "mine" and (out / "features.h5").is_file()
+    (out / "notes.txt").unlink()
     (tmp_path / "busy").mkdir()
     (tmp_path / "busy" / "notes.txt").write_text("mine")
     with pytest.raises(ConfigError, match="holds no hloc export"):

@@ -21,9 +21,9 @@ def test_empty_result_reason_names_the_stage():
     assert "no block pair gave a plane" in empty_result_reason(_counts(block_planes=0), tiles)
     # |H| (|H| - 1) ordered pairs of sets can never exceed 9 |H| votes when |H| <= 10
     impossible = empty_result_reason(_counts(superset_H=10, epipolar_kept=0), tiles)
-    assert "cannot keep a match with only 10 tile match sets" in impossible and "out of 90" in impossible
+    assert "cannot keep a match with only 10 tile match sets" in impossible and "of the 90 epipolar geometries" in impossible
     shared = empty_result_reason(_counts(superset_H=11, epipolar_kept=0), tiles)
-    assert "do not share one epipolar geometry" in shared and "shared by 3 homographies" in shared
+    assert "do not share one epipolar geometry" in shared and "shared by 3 planes (the consensus vote)" in shared
     paper = empty_result_reason(_counts(superset_H=11, epipolar_kept=0), TileConfig(vote="paper"))
     assert "do not share one epipolar geometry" in paper and "consensus" not in paper
     assert "Sec. 3.7" in empty_result_reason(_counts(ftheta_matches=0), tiles)
@@ -57,8 +57,8 @@ def test_empty_result_reason_follows_the_stage_counts():
     assert "do not share one epipolar geometry" in reachable and "the 5 tile match sets" in reachable
     unreachable = empty_result_reason(_counts(superset_H=4, epipolar_kept=0), tiles)
     assert "cannot keep a match with only 4 tile match sets" in unreachable
-    assert "t_xi |H| = 3 x 4" in unreachable
-    assert "out of 12" in unreachable
+    assert "must agree with more than 3 x 4 (t_xi |H|) of the 12 epipolar geometries" in unreachable
+    assert "of the 12 epipolar geometries" in unreachable
     # an earlier stage wins over a later one
     first = empty_result_reason(_counts(block_planes=0, epipolar_kept=0), tiles)
     assert "no block pair gave a plane" in first

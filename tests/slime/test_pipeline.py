@@ -148,7 +148,7 @@ def test_consensus_recovers_the_geometry_when_the_paper_vote_keeps_nothing(graf_
     assert len(results["paper"]) == 0 and results["paper"].summary["decisions"]["vote"] == "paper"
     found = results["consensus"]
     decisions = found.summary["decisions"]
-    assert decisions["vote"] == "consensus" and "largest consistent geometry" in decisions["vote_reason"], decisions
+    assert decisions["vote"] == "consensus" and "largest group of planes sharing one epipolar geometry has" in decisions["vote_reason"], decisions
     ok = correct_matches_homography(found.keypoints0, found.keypoints1, h)
     assert ok.sum() > 100 and ok.mean() >= 0.9, (int(ok.sum()), ok.mean())
 

@@ -51,7 +51,9 @@ def test_select_planes_keeps_the_scene_and_drops_a_wrong_plane():
     assert counts == {"tile_sets": len(sets), "superset_H": len(superset),
                       "epipolar_kept": int(selection.keep.sum()), "epipolar_planes": 2, "fbar_sets": len(selection.fbar),
                       "ftheta_sets": len(selection.ftheta), "ftheta_matches": int(kept.sum())}
-    assert selection.vote == "paper" and "400 matches on 2 homographies" in selection.vote_reason
+    assert selection.vote == "paper" and selection.vote_reason == (
+        "the paper's epipolar vote kept 400 matches consistent with the epipolar geometry of enough pairs of planes "
+        "(M+), on 2 planes")
 
 
 def test_plane_selection_counts_and_arrays():

@@ -1,7 +1,13 @@
 """Data of the ``slime web`` tests: a folder of images (a real stereo pair, a planar pair made by a known
-homography, a file that is not an image), a ``slime pairs`` run folder, and the app's test client."""
+homography, a file that is not an image), a ``slime pairs`` run folder; for the browser tests, a server in a
+thread, a headless Chromium and the screenshots' folder."""
 
 from __future__ import annotations
+
+import os
+import threading
+import time
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -12,6 +18,9 @@ from slime_match.io import save_json, save_npz
 
 # the planar pair: image 1 is image 0 seen through this homography (image 0 -> 1)
 PLANAR_H = np.array([[0.92, 0.06, 18.0], [-0.04, 0.95, 12.0], [1.5e-4, 8e-5, 1.0]])
+# a second plane of the same two views: its homography differs from PLANAR_H by e' v^T, with the epipole e' of
+# image 1 at infinity along x (so F = [e']_x PLANAR_H holds for both planes)
+SECOND_H = PLANAR_H + np.outer([1.0, 0.0, 0.0], [0.0, 0.0, 15.0])
 MANY = 20_000  # matches of the run's big pair
 
 
@@ -88,3 +97,56 @@ def synthetic_stages(rng) -> dict[str, np.ndarray]:
         "tile_matches_xy0": table[:40], "tile_matches_xy1": table[:40] - [20, 0],
         "final_xy0": table[:30], "final_xy1": table[:30] - [20, 0],
     }
+
+
+@pytest.fixture(scope="module")
+def shots(tmp_path_factory) -> Path:
+    folder = Path(os.environ.get("SLIME_WEB_SCREENSHOTS") or tmp_path_factory.mktemp("screenshots"))
+    folder.mkdir(parents=True, exist_ok=True)
+    print(f"screenshots: {folder}")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def annotations(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("browser-annotations")
+
+
+@pytest.fixture(scope="module")
+def server(web_images, web_run, annotations):
+    uvicorn = pytest.importorskip("uvicorn", reason="slime web needs the web extra (uvicorn)")
+    from slime_match.web.app import create_app
+
+    from .browser_steps import free_port
+
+    app = create_app([web_images], [web_run], annotations)
+    port = free_port()
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 30
+    while not server.started:
+        assert time.monotonic() < deadline and thread.is_alive(), "the server did not start"
+        time.sleep(0.05)
+    yield f"http://127.0.0.1:{port}"
+    server.should_exit = True
+    thread.join(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def browser(server):
+    """Headless Chromium at 1400x900 (CSS px)."""
+    webdriver = pytest.importorskip("selenium.webdriver", reason="the browser tests need selenium (the test extra)")
+    from .browser_steps import CHROMIUM, DRIVER
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for argument in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu",
+                     "--window-size=1400,900", "--force-device-scale-factor=1"):
+        options.add_argument(argument)
+    driver = webdriver.Chrome(service=webdriver.ChromeService(DRIVER), options=options)
+    driver.set_script_timeout(30)
+    width, height = driver.execute_script("return [innerWidth, innerHeight];")  # the window's own bars apart
+    driver.set_window_size(2 * 1400 - width, 2 * 900 - height)
+    yield driver
+    driver.quit()

@@ -22,7 +22,7 @@ from slime_match.eval.datasets.wxbs import read_wxbs
 from slime_match.web import is_loopback
 from slime_match.web.app import create_app
 
-from .conftest import MANY, PLANAR_H
+from .conftest import MANY, PLANAR_H, SECOND_H
 
 POST = {"X-Slime-Web": "1"}
 
@@ -57,10 +57,13 @@ def wait(client, job_id: str, timeout: float = 120.0) -> dict:
     raise AssertionError(f"job {job_id} did not finish in {timeout} s")
 
 
-def planar_pairs(n: int, noise: float = 0.0) -> list[dict]:
+def planar_pairs(n: int, noise: float = 0.0, off_plane: int = 0) -> list[dict]:
+    """n pairs of the planar pair; the last ``off_plane`` of them on a second plane (SECOND_H)."""
     rng = np.random.default_rng(3)
     x0 = rng.uniform([30, 30], [370, 270], (n, 2))
     x1 = np.c_[x0, np.ones(n)] @ PLANAR_H.T
+    if off_plane:
+        x1[n - off_plane:] = np.c_[x0[n - off_plane:], np.ones(off_plane)] @ SECOND_H.T
     x1 = x1[:, :2] / x1[:, 2:] + rng.normal(0, noise, (n, 2))
     return [{"x0": a[0], "y0": a[1], "x1": b[0], "y1": b[1], "set": 0, "occluded": False} for a, b in zip(x0, x1)]
 
@@ -79,7 +82,8 @@ def test_page_and_static_files(client):
     page = client.get("/")
     assert page.status_code == 200 and "<canvas" in page.text and "/static/app.js" in page.text
     assert "http://" not in page.text and "https://" not in page.text  # nothing from the network
-    for name in ("app.js", "style.css"):
+    for name in ("core.js", "viewer.js", "jobs.js", "tools.js", "annotation-store.js", "annotate.js", "app.js",
+                 "style.css"):
         assert client.get(f"/static/{name}").status_code == 200
     assert client.get("/static/../app.py").status_code == 404
 
@@ -102,7 +106,7 @@ def test_images_listed_and_served_upright_as_png(client, web_images):
 
 @pytest.mark.parametrize("path, status", [
     ("../run/pairs.json", 403), ("../../../../../../etc/passwd", 403), ("/etc/passwd", 403),
-    ("sub/../../run/pairs.json", 403), ("nothere.png", 404), ("", 400), ("notes.txt", 400), ("fake.png", 400),
+    ("sub/../../run/pairs.json", 403), ("nothere.png", 404), ("", 400), ("notes.txt", 400), ("fake.png", 415),
 ])
 def test_image_paths_outside_or_bad_are_refused(client, path, status):
     answer = client.get("/api/image", params={"root": "images", "path": path})
@@ -255,7 +259,7 @@ def test_a_fault_of_the_server_is_answered_as_json(web_images, web_run, monkeypa
     def broken(folder):
         raise RuntimeError("disk on fire")
 
-    monkeypatch.setattr("slime_match.web.app.matches_payload", broken)
+    monkeypatch.setattr("slime_match.web.routes_runs.matches_payload", broken)
     with TestClient(create_app([web_images], [web_run]), raise_server_exceptions=False) as other:
         answer = other.get("/api/runs/run/pairs/0")
         assert answer.status_code == 500 and "disk on fire" in answer.json()["error"]
@@ -318,6 +322,8 @@ def test_missing_folders_stop_before_serving(tmp_path, capsys):
     assert "pairs.json" in capsys.readouterr().err
     assert main(["web", "--max-upload-mb", "0"]) == 2
     assert "upload limit" in capsys.readouterr().err
+    assert main(["web", "--max-megapixels", "0"]) == 2
+    assert "image limit" in capsys.readouterr().err
     (tmp_path / "file").write_text("")
     assert main(["web", "--annotations", str(tmp_path / "file")]) == 2
     assert "is a file" in capsys.readouterr().err
@@ -337,13 +343,14 @@ def test_fit_shows_h_from_4_pairs_and_f_from_8(client):
     four = client.post("/api/annotate/fit", headers=POST, json={"pairs": planar_pairs(4)}).json()
     H = np.array(four["H"])
     assert np.allclose(H / H[2, 2], PLANAR_H, atol=1e-6) and four["F"] is None
-    pairs = planar_pairs(12, noise=0.3)
+    pairs = planar_pairs(12, noise=0.3, off_plane=4)
+    pairs[8]["set"] = pairs[9]["set"] = 2
     pairs[10]["set"] = pairs[11]["set"] = 1
     pairs.append({"x0": 5.0, "y0": 6.0, "x1": None, "y1": None, "set": 0, "occluded": True})
     fitted = client.post("/api/annotate/fit", headers=POST, json={"pairs": pairs}).json()
     assert fitted["visible"] == 12 and fitted["F"] is not None
     assert fitted["set_H"]["1"] is None and fitted["set_H"]["0"] is not None  # set 1 has 2 pairs
-    assert max(r for r in fitted["residual_H"][:10]) < 1.5 and fitted["residual_H"][10:] == [None, None, None]
+    assert max(r for r in fitted["residual_H"][:8]) < 1.5 and fitted["residual_H"][8:] == [None] * 5
     assert max(r for r in fitted["residual_F"][:12]) < 1.5 and fitted["residual_F"][12] is None
 
 
@@ -365,8 +372,9 @@ def test_bad_annotations(client, pairs, words):
 
 def test_export_as_the_bench_reads(client, tmp_path):
     few = client.post("/api/annotate/export", headers=POST, json={"pairs": planar_pairs(6), "model": "F"})
-    assert few.status_code == 400 and "at least 8" in few.json()["error"]
-    corrs = client.post("/api/annotate/export", headers=POST, json={"pairs": planar_pairs(9), "model": "F"})
+    assert few.status_code == 400 and "F needs 8 pairs, there are 6" in few.json()["error"]
+    corrs = client.post("/api/annotate/export", headers=POST, json={"pairs": planar_pairs(9, off_plane=3),
+                                                                     "model": "F"})
     assert 'filename="corrs.txt"' in corrs.headers["content-disposition"]
     assert np.loadtxt(io.StringIO(corrs.text)).shape == (9, 4)
     hfile = client.post("/api/annotate/export", headers=POST, json={"pairs": planar_pairs(5), "model": "H"})
@@ -375,7 +383,7 @@ def test_export_as_the_bench_reads(client, tmp_path):
 
 
 def test_save_open_round_trip_through_the_bench_readers(client, annotations):
-    pairs = planar_pairs(10, noise=0.05)
+    pairs = planar_pairs(10, noise=0.05, off_plane=3)
     pairs.append({"x0": 40.0, "y0": 50.0, "x1": None, "y1": None, "set": 0, "occluded": True})
     body = {"name": "astro", "image0": ref("plane0.png"), "image1": ref("plane1.png"), "pairs": pairs}
     saved = client.post("/api/annotate/save", headers=POST, json={**body, "model": "F"}).json()
@@ -387,7 +395,8 @@ def test_save_open_round_trip_through_the_bench_readers(client, annotations):
     assert again.status_code == 400 and "exists" in again.json()["error"]
     assert client.post("/api/annotate/save", headers=POST, json={**body, "model": "F", "overwrite": True}).status_code == 200
 
-    planar = client.post("/api/annotate/save", headers=POST, json={**body, "model": "H"}).json()
+    coplanar = planar_pairs(10, noise=0.05) + pairs[10:]
+    planar = client.post("/api/annotate/save", headers=POST, json={**body, "model": "H", "pairs": coplanar}).json()
     assert planar["kind"] == "planar" and "planar/astro_H12.txt" in planar["files"]
     [pair] = read_planar(annotations / "planar")
     assert pair.name == "astro/1-2" and transfer_gap(pair.H, PLANAR_H) < 1.0
@@ -397,14 +406,15 @@ def test_save_open_round_trip_through_the_bench_readers(client, annotations):
     opened = client.get("/api/annotate/open", params={"root": "annotations", "path": "wxbs/astro/corrs.txt"}).json()
     assert opened["kind"] == "wxbs" and len(opened["pairs"]) == 11 and opened["pairs"][10]["occluded"]
     assert opened["image0"] == ref("wxbs/astro/01.png", "annotations")
+    wxbs_opened = opened
     opened = client.get("/api/annotate/open", params={"root": "annotations", "path": "planar/astro_H12.txt"}).json()
     assert opened["kind"] == "planar" and np.allclose(opened["H"], pair.H) and len(opened["pairs"]) == 11
 
     # a pair opened from the annotation folder saved again under its name: its images are its own copies
-    resave = {"name": "astro", "model": "F", "image0": opened["image0"], "image1": opened["image1"],
-              "pairs": opened["pairs"], "overwrite": True}
+    resave = {"name": "astro", "model": "F", "image0": wxbs_opened["image0"], "image1": wxbs_opened["image1"],
+              "pairs": wxbs_opened["pairs"], "overwrite": True}
     assert client.post("/api/annotate/save", headers=POST, json=resave).status_code == 200
-    resave.update(model="H", image0=ref("planar/astro1.png", "annotations"), image1=ref("planar/astro2.png",
+    resave.update(model="H", pairs=opened["pairs"], image0=ref("planar/astro1.png", "annotations"), image1=ref("planar/astro2.png",
                                                                                           "annotations"))
     assert client.post("/api/annotate/save", headers=POST, json=resave).status_code == 200
     assert len(read_wxbs(annotations / "wxbs")) == len(read_planar(annotations / "planar")) == 1
@@ -429,7 +439,7 @@ def test_bad_saves(client, body, status, words):
 
 def test_open_refuses_other_files(client):
     answer = client.get("/api/annotate/open", params={"root": "images", "path": "left.png"})
-    assert answer.status_code == 400 and "neither" in answer.json()["error"]
+    assert answer.status_code == 400 and "none of the ground truths" in answer.json()["error"]
     answer = client.get("/api/annotate/open", params={"root": "images", "path": "../run/pairs.json"})
     assert answer.status_code == 403
 

@@ -7,123 +7,25 @@ The screenshots go to ``$SLIME_WEB_SCREENSHOTS`` when set, else to a temporary f
 
 from __future__ import annotations
 
-import os
-import shutil
-import socket
-import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 pytest.importorskip("fastapi", reason="slime web needs the web extra (FastAPI)")
-uvicorn = pytest.importorskip("uvicorn", reason="slime web needs the web extra (uvicorn)")
-webdriver = pytest.importorskip("selenium.webdriver", reason="the browser tests need selenium (the test extra)")
+pytest.importorskip("uvicorn", reason="slime web needs the web extra (uvicorn)")
+pytest.importorskip("selenium.webdriver", reason="the browser tests need selenium (the test extra)")
 from selenium.webdriver.common.actions.action_builder import ActionBuilder
 from selenium.webdriver.common.keys import Keys
 from selenium.webdriver.support.ui import Select
 
 from slime_match.eval.datasets.planar import read_planar
 from slime_match.eval.datasets.wxbs import read_wxbs
-from slime_match.web.app import create_app
 
-from .conftest import MANY, PLANAR_H
+from .browser_steps import needs_browser, open_page, pick, pointer, settle, until
+from .conftest import MANY, PLANAR_H, SECOND_H
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-DRIVER = shutil.which("chromedriver")
-pytestmark = pytest.mark.skipif(CHROMIUM is None or DRIVER is None,
-                                reason="needs Debian's chromium and chromium-driver (apt-get install chromium "
-                                       "chromium-driver; .ci/run installs them)")
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-@pytest.fixture(scope="module")
-def shots(tmp_path_factory) -> Path:
-    folder = Path(os.environ.get("SLIME_WEB_SCREENSHOTS") or tmp_path_factory.mktemp("screenshots"))
-    folder.mkdir(parents=True, exist_ok=True)
-    print(f"screenshots: {folder}")
-    return folder
-
-
-@pytest.fixture(scope="module")
-def annotations(tmp_path_factory) -> Path:
-    return tmp_path_factory.mktemp("browser-annotations")
-
-
-@pytest.fixture(scope="module")
-def server(web_images, web_run, annotations):
-    app = create_app([web_images], [web_run], annotations)
-    port = free_port()
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 30
-    while not server.started:
-        assert time.monotonic() < deadline and thread.is_alive(), "the server did not start"
-        time.sleep(0.05)
-    yield f"http://127.0.0.1:{port}"
-    server.should_exit = True
-    thread.join(timeout=10)
-
-
-@pytest.fixture(scope="module")
-def browser(server):
-    options = webdriver.ChromeOptions()
-    options.binary_location = CHROMIUM
-    for argument in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu",
-                     "--window-size=1440,900", "--force-device-scale-factor=1"):
-        options.add_argument(argument)
-    driver = webdriver.Chrome(service=webdriver.ChromeService(DRIVER), options=options)
-    driver.set_script_timeout(30)
-    yield driver
-    driver.quit()
-
-
-def until(condition, timeout: float = 60.0, what: str = "the page"):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = condition()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError(f"timed out waiting for {what}")
-
-
-def open_page(browser, server):
-    browser.get(server + "/")
-    until(lambda: browser.execute_script("return document.body.dataset.ready === '1'"), 60, "the page to load")
-
-
-def pick(browser, side: int, name: str) -> None:
-    until(lambda: any(o.get_attribute("value") == name
-                      for o in browser.find_elements("css selector", f"#img{side}-path option")), 10,
-          f"{name} in the list")
-    Select(browser.find_element("id", f"img{side}-path")).select_by_value(name)
-    until(lambda: browser.execute_script(f"return !!slimeWeb.S.imgs[{side}] && "
-                                         f"slimeWeb.S.images[{side}].path === '{name}'"), 10, f"{name} shown")
-
-
-def settle(browser) -> None:
-    until(lambda: not browser.execute_script("return slimeWeb.busy()"), 60, "the page to settle")
-    browser.execute_script("slimeWeb.view.draw()")
-
-
-def pointer(browser, pane: int, x: float, y: float, click: bool = True) -> None:
-    """Move to (and click) image point (x, y) of a pane, in viewport pixels (rounded)."""
-    left, top = browser.execute_script("const r = slimeWeb.view.canvas.getBoundingClientRect(); "
-                                       "return [r.left, r.top];")
-    sx, sy = browser.execute_script(f"return slimeWeb.screenOf({pane}, {x}, {y});")
-    actions = ActionBuilder(browser)
-    actions.pointer_action.move_to_location(round(left + sx), round(top + sy))
-    if click:
-        actions.pointer_action.click()
-    actions.perform()
+pytestmark = needs_browser
 
 
 def test_match_two_images_see_count_and_stage_layers(browser, server, shots):
@@ -254,9 +156,40 @@ def test_annotate_a_planar_pair_and_save_it_for_the_bench(browser, server, shots
               f"pair {k + 1}")
     settle(browser)
     assert len(browser.find_elements("css selector", "#ann-pairs tbody tr")) == 8
-    until(lambda: "F: fitted" in browser.find_element("id", "ann-status").text, 60, "the fit")
+    until(lambda: "H: fitted" in browser.find_element("id", "ann-status").text, 60, "the fit")
+    # eight pairs on one plane leave F undetermined: refused, with the reason
+    assert "F refused: 8 of the 8 pairs lie on one plane" in browser.find_element("id", "ann-status").text
+    assert browser.execute_script("return slimeWeb.S.annot.fit.F;") is None
 
-    # the cursor over a new point of image 0: its H reprojection and its epipolar line in image 1
+    # saved as a planar pair (H): the bench's reader reads it back
+    name = browser.find_element("id", "ann-name")
+    name.clear()
+    name.send_keys("astro")
+    browser.find_element("id", "ann-save").click()
+    until(lambda: "saved (planar)" in browser.find_element("id", "ann-status").text, 60, "the planar save")
+    [planar] = read_planar(annotations / "planar")
+    corners = np.array([[0, 0, 1], [399, 0, 1], [0, 299, 1], [399, 299, 1]], float)
+    ours, true = corners @ planar.H.T, corners @ PLANAR_H.T
+    assert np.linalg.norm(ours[:, :2] / ours[:, 2:] - true[:, :2] / true[:, 2:], axis=1).max() < 3.0
+
+    # a second plane (a new set) determines F
+    browser.find_element("id", "ann-new-set").click()
+    second = [(100, 110), (280, 100), (170, 220), (320, 160)]
+    for k, (x, y) in enumerate(second):
+        pointer(browser, 0, x, y)
+        x0, y0 = browser.execute_script("const p = slimeWeb.S.annot.pending; return [p.x, p.y];")
+        mapped = SECOND_H @ [x0, y0, 1.0]
+        pointer(browser, 1, mapped[0] / mapped[2], mapped[1] / mapped[2])
+        until(lambda k=k: browser.execute_script(f"return slimeWeb.S.annot.pairs.length === {k + 9};"), 60,
+              f"pair {k + 9}")
+    settle(browser)
+    until(lambda: "F: fitted" in browser.find_element("id", "ann-status").text, 60, "the fit of F")
+    residuals = [row.find_elements("css selector", "td")[5].text
+                 for row in browser.find_elements("css selector", "#ann-pairs tbody tr")]
+    assert len(residuals) == 12 and all(float(r) < 3.0 for r in residuals)  # each pair's F residual (px)
+
+    # the cursor over a new point of image 0: its H reprojection (set 0) and its epipolar line in image 1
+    browser.execute_script("slimeWeb.S.annot.set = 0;")
     probe = np.array([230.0, 110.0])
     pointer(browser, 0, *probe, click=False)
     settle(browser)
@@ -269,25 +202,17 @@ def test_annotate_a_planar_pair_and_save_it_for_the_bench(browser, server, shots
     assert epiline["pane"] == 1 and abs(a * truth[0] + b * truth[1] + c) / np.hypot(a, b) < 3.0
     browser.save_screenshot(str(shots / "annotate.png"))
 
-    # save as a WxBS pair (F) and as a planar pair (H): the bench's readers read them back
+    # saved as a WxBS pair (F): the bench's reader reads its 12 pairs
     browser.find_element("id", "model-F").click()
-    name = browser.find_element("id", "ann-name")
-    name.clear()
-    name.send_keys("astro")
     browser.find_element("id", "ann-save").click()
     until(lambda: "saved (wxbs)" in browser.find_element("id", "ann-status").text, 60, "the WxBS save")
     [pair] = read_wxbs(annotations / "wxbs")
     corrs = pair.corrs
-    mapped = np.c_[corrs[:, :2], np.ones(len(corrs))] @ PLANAR_H.T
-    errors = np.linalg.norm(mapped[:, :2] / mapped[:, 2:] - corrs[:, 2:], axis=1)
-    assert corrs.shape == (8, 4) and errors.max() < 1.5, errors
-    browser.find_element("id", "model-H").click()
-    browser.find_element("id", "ann-save").click()
-    until(lambda: "saved (planar)" in browser.find_element("id", "ann-status").text, 60, "the planar save")
-    [planar] = read_planar(annotations / "planar")
-    corners = np.array([[0, 0, 1], [399, 0, 1], [0, 299, 1], [399, 299, 1]], float)
-    ours, true = corners @ planar.H.T, corners @ PLANAR_H.T
-    assert np.linalg.norm(ours[:, :2] / ours[:, 2:] - true[:, :2] / true[:, 2:], axis=1).max() < 3.0
+    errors = []
+    for rows, H in ((corrs[:8], PLANAR_H), (corrs[8:], SECOND_H)):
+        mapped = np.c_[rows[:, :2], np.ones(len(rows))] @ H.T
+        errors += np.linalg.norm(mapped[:, :2] / mapped[:, 2:] - rows[:, 2:], axis=1).tolist()
+    assert corrs.shape == (12, 4) and max(errors) < 1.5, errors
 
     # move a point, undo it, delete one, undo
     before = browser.execute_script("return slimeWeb.S.annot.pairs[0].x0;")
@@ -307,9 +232,9 @@ def test_annotate_a_planar_pair_and_save_it_for_the_bench(browser, server, shots
     browser.find_element("id", "ann-undo").click()
     browser.find_element("id", "ann-undo").click()
     browser.find_element("id", "ann-delete").click()  # pair 1 is selected since it was grabbed
-    assert browser.execute_script("return slimeWeb.S.annot.pairs.length;") == 7
+    assert browser.execute_script("return slimeWeb.S.annot.pairs.length;") == 11
     browser.find_element("id", "ann-undo").click()
-    assert browser.execute_script("return slimeWeb.S.annot.pairs.length;") == 8
+    assert browser.execute_script("return slimeWeb.S.annot.pairs.length;") == 12
 
 
 def test_points_sit_on_the_pixel_centres_the_library_uses(browser, server, web_images):

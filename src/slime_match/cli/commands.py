@@ -118,6 +118,8 @@ def cmd_make_pairs(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """Match scikit-image's Middlebury motorcycle stereo pair and score it with its disparity map."""
+    from functools import partial
+
     import numpy as np
 
     from ..eval.datasets.motorcycle import stereo_motorcycle
@@ -127,10 +129,6 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     left, right, disparity = stereo_motorcycle()
     out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = [out / "motorcycle_left.png", out / "motorcycle_right.png"]
-    for path, image in zip(paths, (left, right)):
-        _write_rgb(path, image)
     image0, image1 = left.astype(np.float32) / 255.0, right.astype(np.float32) / 255.0
     progress.enable(not args.quiet)
     with _stage_lines(args):
@@ -143,7 +141,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
         "correct_15px": int(correct.sum()),
         "precision": float(correct.sum() / max(int(known.sum()), 1)),
     }
-    write_pair_outputs(result, image0, image1, out)
+    pictures = {"motorcycle_left.png": left, "motorcycle_right.png": right}
+    write_pair_outputs(result, image0, image1, out,
+                       extra={name: partial(_write_rgb, rgb=rgb) for name, rgb in pictures.items()})
     if args.quiet:
         return 0
     _report(result, out)
@@ -250,7 +250,7 @@ def cmd_hloc(args: argparse.Namespace) -> int:
 def cmd_web(args: argparse.Namespace) -> int:
     from ..web import serve  # FastAPI and uvicorn load only here
 
-    serve(args.host, args.port, args.images, args.run, args.annotations, args.max_upload_mb)
+    serve(args.host, args.port, args.images, args.run, args.annotations, args.max_upload_mb, args.max_megapixels)
     return 0
 
 
@@ -379,6 +379,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "(DIR/wxbs/<name>/, DIR/planar/); without it, annotations are downloaded")
     web.add_argument("--max-upload-mb", type=float, default=None, metavar="MB",
                      help="largest image upload accepted (default 25)")
+    web.add_argument("--max-megapixels", type=float, default=None, metavar="MP",
+                     help="largest image taken, read from its header before decoding (default 40)")
     web.set_defaults(func=cmd_web)
 
     from ..eval.bench_args import add_bench_parser

@@ -11,6 +11,7 @@ from ..choices import (
     DETECTIONS,
     DEVICES,
     LEARNED_BASES,
+    MATCH_OPTIONS,
     ORIENTATION_CHOICES,
     RANSAC_CHOICES,
     SHAPE_METHODS,
@@ -150,9 +151,7 @@ def parse_setting(text: str) -> tuple[str, str]:
 
 
 def options_of(args: argparse.Namespace) -> dict:
-    keys = ("method", "base", "descriptor", "shape", "orientation", "upright", "ransac", "threshold", "seed", "device",
-            "weights_dir", "magnification", "scales", "detection", "tile_test", "min_side",
-            "max_side", "views")
+    keys = ("method", "weights_dir", *(key for key in MATCH_OPTIONS if key != "workers"))
     return {key: getattr(args, key) for key in keys} | {"workers": getattr(args, "slime_workers", None)}
 
 

@@ -40,8 +40,14 @@ from slime_match.eval.methods import make_method, method_label
 from slime_match.eval.predictions import _load_prediction, collect_pairs, load_pair_images, pair_slug, predict
 from slime_match.eval.scoring import evaluate_pair, evaluate_protocol, pair_gt, pair_protocol
 from slime_match.io import save_json, save_npz
+from slime_match.output_folder import replacing_owned_files
 
 logger = logging.getLogger("slime_match")
+
+METRICS_FILE = "metrics.json"
+MAPS_FOLDER = "maps"
+REPORT_FILES = (METRICS_FILE, "table.md", "table.csv", "bar_*.png",  # all replaced by each run
+                f"{MAPS_FOLDER}/*/coverage_*.png", f"{MAPS_FOLDER}/*/error_*.png")
 
 
 def _warn_stale(records: list[dict[str, Any]], out: Path) -> None:
@@ -64,17 +70,37 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
         "output": results folder, "protocols": the standard-protocol summary of
         :func:`slime_match.eval.aggregation.aggregate`}.
     """
-    from slime_match.eval import figures, report
+    from slime_match.eval import report
 
     config.validate()
     out = Path(config.output)
     pairs = collect_pairs(config)
     if not pairs:
         raise ConfigError(f"no pairs in {config.datasets}")
+    with replacing_owned_files(out, REPORT_FILES, last=METRICS_FILE) as staging:  # predictions/ is a cache
+        records, stats = _score_pairs(config, pairs, out, staging / MAPS_FOLDER)
+        _warn_stale(records, out)
+        summary = _finite({
+            "config": asdict(config),
+            "methods": {method_label(s): s for s in config.methods},
+            "written": time.strftime("%Y-%m-%d %H:%M:%S"),
+            "pairs": records,
+        })
+        save_json(staging / METRICS_FILE, summary)
+        agg = report.write_report(staging, summary)
+    logger.info("bench: %d predictions computed, %d loaded from %s", stats["computed"], stats["cached"], out)
+    return {**stats, "pairs": len(pairs), "output": str(out), "protocols": agg["protocols"]}
+
+
+def _score_pairs(config: BenchConfig, pairs: list, out: Path, map_dir: Path
+                 ) -> tuple[list[dict[str, Any]], dict[str, int]]:
+    """Predict (or load from ``out``'s cache) and score every pair: the per-pair records of ``metrics.json``
+    and the counts of predictions computed and cached; maps of the first pairs go under ``map_dir``."""
+    from slime_match.eval import figures
+
     labels = {spec: method_label(spec) for spec in config.methods}
     methods: dict[str, Any] = {}  # built lazily, only when a prediction is missing
     records, stats = [], {"computed": 0, "cached": 0}
-    map_dir = out / "maps"
     progress = tqdm(
         total=len(pairs) * len(config.methods), desc="bench", unit="pred", file=sys.stderr, disable=None
     )
@@ -127,19 +153,7 @@ def run_bench(config: BenchConfig) -> dict[str, Any]:
         if index < config.map_pairs:
             figures.write_pair_maps(map_dir / pair_slug(pair.name), images, gt, extras, config.t_perp)
     progress.close()
-    _warn_stale(records, out)
-    started = time.strftime("%Y-%m-%d %H:%M:%S")
-    summary = {
-        "config": asdict(config),
-        "methods": {labels[s]: s for s in config.methods},
-        "written": started,
-        "pairs": records,
-    }
-    summary = _finite(summary)
-    save_json(out / "metrics.json", summary)
-    agg = report.write_report(out, summary)
-    logger.info("bench: %d predictions computed, %d loaded from %s", stats["computed"], stats["cached"], out)
-    return {**stats, "pairs": len(pairs), "output": str(out), "protocols": agg["protocols"]}
+    return records, stats
 
 
 def _finite(obj: Any) -> Any:

@@ -48,15 +48,18 @@ def match_views(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, 
     parts = [(xy0, xy1, scores)]
     keypoints1 = features1.xy.detach().cpu().numpy().astype(np.float64)  # image 1's, once for every view
 
-    def enough() -> str:
-        support = consistent_matches(*(np.concatenate([p[k] for p in parts]) for k in (0, 1)), seed)
-        return f"{support} matches consistent with one F (>= {config.min_inliers})" \
-            if support >= config.min_inliers else ""
+    def support() -> tuple[bool, str]:
+        """Whether the pooled matches need no more views, and their count in words."""
+        count = consistent_matches(*(np.concatenate([p[k] for p in parts]) for k in (0, 1)), seed)
+        enough = count >= config.min_inliers
+        return enough, (f"{'enough' if enough else 'too few'} matches consistent with one epipolar geometry "
+                        f"(a fundamental matrix F): {count} {'>=' if enough else '<'} {config.min_inliers}")
 
     for tilt in config.tilts:
-        if config.mode == "auto" and (reason := enough()):
-            record.reason = reason
-            break
+        if config.mode == "auto":
+            enough, record.reason = support()
+            if enough:
+                break
         for angle in views_of_tilt(tilt):
             view_image, view = simulate_view(image0, tilt, angle)
             features0 = pipeline.extract(view_image)
@@ -69,7 +72,10 @@ def match_views(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, 
         record.tilts.append(tilt)
         logger.info("Views of tilt %g: %d matches in all", tilt, sum(len(p[0]) for p in parts))
     else:
-        record.reason = (enough() if config.mode == "auto" else "") or "every tilt tried"
+        record.reason = "every tilt tried"
+        if config.mode == "auto":
+            enough, reason = support()
+            record.reason = reason if enough else f"every tilt tried, and still {reason}"
     xy0, xy1, scores = (np.concatenate([p[k] for p in parts]) for k in range(3))
     order = np.argsort(scores, kind="stable")
     return xy0[order], xy1[order], scores[order], record

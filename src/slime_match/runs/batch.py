@@ -33,7 +33,7 @@ from ..choices import BATCH_BACKENDS
 from ..config import MatchConfig
 from ..errors import ConfigError, ImageError, some_of
 from ..matcher import FEATURE_CACHE_MB, Matcher
-from .index import RUN_FILE, claim_run_folder, write_index, write_record
+from .index import RUN_FILE, claim_run_folder, drop_other_pairs, write_index, write_record
 from .outputs import is_complete
 from .pair_tasks import PairJob, PairWorker, finished_counts, job_images, pair_record, set_threads
 from .ray_backend import check_node_cpus, connected, match_on_ray
@@ -108,7 +108,8 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
         output: the run folder.
         workers: pairs matched at once: local processes (None: 1), or Ray actors (None: as many as the
             cluster's CPUs hold, ``cpus_per_worker`` each).
-        overwrite: recompute finished pairs (and accept a run folder made with another configuration).
+        overwrite: recompute finished pairs, and accept a run folder made with another configuration (whose
+            pairs that ``jobs`` does not list are then removed: no result of another configuration stays).
         plot: also draw each pair's matches.png.
         feature_cache_mb: memory (MiB) for the Slime features of recent images, reused by later pairs with
             the same image (see :class:`Matcher`): shared by the local workers, each Ray actor's own; 0 turns
@@ -146,7 +147,9 @@ def match_pairs(config: MatchConfig, jobs: list[PairJob], output: str | os.PathL
     with _cluster(backend, ray_address, cpus_per_worker or 1) as ray:
         # resolves "auto" choices and fails early on missing weights or a missing GPU (and a bad cache budget)
         matcher = Matcher(config, feature_cache_mb=feature_cache_mb)
-        claim_run_folder(out, matcher.config, overwrite)
+        if claim_run_folder(out, matcher.config, overwrite) and (dropped := drop_other_pairs(out, jobs)):
+            logger.warning("removed %d pair(s) of the earlier configuration that the pairs file does not list (%s)",
+                           len(dropped), some_of(dropped, 3))
         selected = range(len(jobs)) if shard is None else shard_positions([job_images(j) for j in jobs], *shard)
         records: dict[int, dict[str, Any]] = {}
         todo = []

@@ -40,6 +40,7 @@ logger = logging.getLogger("slime_match")
 DATABASE_FILE = "database.db"
 VERIFIED_PAIRS_FILE = "pairs.txt"
 SPARSE_FOLDER = "sparse"
+EXPORT_FILES = (DATABASE_FILE, VERIFIED_PAIRS_FILE, SUMMARY_FILE, SPARSE_FOLDER)  # the database first: the mark
 
 
 # The eight ways a file's EXIF orientation turns its stored pixels (raw, h x w) into the upright image:
@@ -152,7 +153,7 @@ def export_run(run: str | os.PathLike, image_dir: str | os.PathLike, output: str
     if threads < 1:
         raise ConfigError(f"threads must be >= 1, got {threads}")
     out = Path(output)
-    check_export_folder(out, DATABASE_FILE, "COLMAP", overwrite)
+    check_export_folder(out, EXPORT_FILES, "COLMAP", overwrite)
     start = time.perf_counter()
     pairs = read_run(run, inliers_only)
     check_images(pairs, image_dir)

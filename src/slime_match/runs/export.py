@@ -136,30 +136,40 @@ def check_images(pairs: list[PairMatches], image_dir: str | os.PathLike) -> list
     return names
 
 
-def check_export_folder(out: Path, marker: str, tool: str, overwrite: bool) -> None:
+def check_export_folder(out: Path, own: tuple[str, ...], tool: str, overwrite: bool) -> None:
     """Refuse an output folder that is a file or is not empty, unless ``overwrite`` and it holds an earlier
-    export (recognised by its ``marker`` file) of ``tool`` ("COLMAP", "hloc")."""
+    export of ``tool`` ("COLMAP", "hloc") and nothing else: ``own`` names the export's files and folders, the
+    first one marking an export. A user's file in the folder is never deleted with it."""
     if out.exists() and not out.is_dir():
         raise ConfigError(f"output folder {out} is a file, not a folder: choose another output folder")
     if not out.is_dir() or not any(out.iterdir()):
         return
-    if not (out / marker).is_file():
+    if not (out / own[0]).is_file():
         raise ConfigError(f"{out} is not empty and holds no {tool} export: choose another output folder")
     if not overwrite:
         raise ConfigError(f"{out} holds an earlier {tool} export: use --overwrite to replace it")
+    others = sorted(p.name for p in out.iterdir() if p.name not in own)
+    if others:
+        raise ConfigError(f"{out} holds files that are not part of a {tool} export ({some_of(others, 3)}), which "
+                          "--overwrite would delete: move them or choose another output folder")
 
 
 @contextmanager
 def staged_folder(out: Path) -> Iterator[Path]:
     """A fresh folder beside ``out`` to write an export into; it replaces ``out`` when the block ends without
-    an error, and is removed otherwise. The folder gets the permissions of a plain ``mkdir`` under the umask."""
+    an error, and is removed otherwise. The earlier ``out`` is renamed aside before the new one takes its name,
+    and deleted after. The folder gets the permissions of a plain ``mkdir`` under the umask."""
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}-staging-"))
     os.chmod(staging, 0o777 & ~current_umask())  # a plain mkdir's permissions (mkdtemp's are owner-only)
+    earlier = None
     try:
         yield staging
         if out.exists():
-            shutil.rmtree(out)
+            earlier = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}-earlier-"))
+            os.replace(out, earlier)  # replaces the empty folder just made
         os.replace(staging, out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+        if earlier is not None:
+            shutil.rmtree(earlier, ignore_errors=True)

@@ -31,6 +31,7 @@ logger = logging.getLogger("slime_match")
 FEATURES_FILE = "features.h5"
 MATCHES_FILE = "matches.h5"
 PAIRS_FILE = "pairs.txt"
+EXPORT_FILES = (FEATURES_FILE, MATCHES_FILE, PAIRS_FILE, SUMMARY_FILE)  # features.h5 first: the mark
 
 
 def pair_key(name0: str, name1: str) -> str:
@@ -71,7 +72,7 @@ def export_hloc(run: str | os.PathLike, image_dir: str | os.PathLike, output: st
     """
     h5py = _h5py()
     out = Path(output)
-    check_export_folder(out, FEATURES_FILE, "hloc", overwrite)
+    check_export_folder(out, EXPORT_FILES, "hloc", overwrite)
     start = time.perf_counter()
     pairs = read_run(run, inliers_only)
     names = check_images(pairs, image_dir)

@@ -18,7 +18,7 @@ from .. import __version__
 from ..config import MatchConfig
 from ..errors import ConfigError
 from ..io import jsonable, save_json
-from .outputs import is_complete
+from .outputs import is_complete, remove_pair_outputs
 from .pair_tasks import PairJob, finished_counts, pair_record
 
 INDEX_FILE = "pairs.json"
@@ -27,11 +27,14 @@ RECORDS_FOLDER = "records"
 REBUILDS = 10  # at most, by one call of write_index
 
 
-def claim_run_folder(out: Path, config: MatchConfig, overwrite: bool) -> None:
+def claim_run_folder(out: Path, config: MatchConfig, overwrite: bool) -> bool:
     """Record the configuration in ``out/run.json``; refuse to resume a run made with another one.
 
     The file is created only where none exists (a hard link of a complete file), so that of processes starting
     one run folder at once with different configurations, all but the first are refused.
+
+    Returns:
+        Whether ``overwrite`` replaced the record of a run made with another configuration.
 
     Raises:
         ConfigError: ``out`` holds a run made with another configuration (and ``overwrite`` is False).
@@ -39,15 +42,17 @@ def claim_run_folder(out: Path, config: MatchConfig, overwrite: bool) -> None:
     current = {"slime_match_version": __version__, "config": jsonable(config.to_dict())}
     run_file = out / RUN_FILE
     if overwrite:
+        previous = json.loads(run_file.read_text()).get("config") if run_file.is_file() else current["config"]
         save_json(run_file, current)
-        return
+        return previous != current["config"]
     if _create(run_file, current):
-        return
+        return False
     previous = json.loads(run_file.read_text()).get("config")
     if previous != current["config"]:
         changed = sorted(_differences(previous or {}, current["config"]))
         raise ConfigError(f"{out} holds a run made with another configuration (differs in: "
                           f"{', '.join(changed) or 'everything'}): use another output folder or --overwrite")
+    return False
 
 
 def _create(path: Path, content: dict[str, Any]) -> bool:
@@ -80,6 +85,23 @@ def _differences(a: dict, b: dict, prefix: str = "") -> list[str]:
         elif va != vb:
             keys.append(prefix + key)
     return keys
+
+
+def drop_other_pairs(out: Path, jobs: list[PairJob]) -> list[str]:
+    """Remove the pairs of ``out`` that are not among ``jobs``: their records and their folders' result files
+    (the folder itself when that empties it). Returns their folder names, sorted."""
+    keep = {f"{job.folder}.json" for job in jobs}
+    dropped = []
+    for name in sorted(_records_state(out)):
+        if name in keep:
+            continue
+        folder = out / name[: -len(".json")]
+        remove_pair_outputs(folder)
+        if folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
+        (out / RECORDS_FOLDER / name).unlink(missing_ok=True)
+        dropped.append(folder.name)
+    return dropped
 
 
 def write_record(out: Path, record: dict[str, Any]) -> None:

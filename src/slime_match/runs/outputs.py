@@ -2,47 +2,55 @@
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from ..io import save_json, save_npz
+from ..output_folder import remove_owned_files, replacing_owned_files
 from ..result import MatchResult
 
 MATCHES_FILE = "matches.npz"
 SUMMARY_FILE = "summary.json"
+PLOT_FILE = "matches.png"
+STAGES_FILE = "stages.npz"
+PAIR_FILES = (MATCHES_FILE, SUMMARY_FILE, PLOT_FILE, STAGES_FILE)  # every file a pair's folder may hold
 
 
 def write_pair_outputs(result: MatchResult, image0: np.ndarray, image1: np.ndarray, out: Path,
-                       plot: bool = True) -> None:
-    """Write the pair's files into ``out``, all or nothing (staged in a hidden folder, then moved).
+                       plot: bool = True, extra: dict[str, Callable[[Path], None]] | None = None) -> None:
+    """Write the pair's files into ``out``, all or nothing, in place of an earlier result's files.
+
+    The files are staged in a hidden folder inside ``out`` and moved in when all are written; an earlier
+    result's files that this one does not write again (its ``stages.npz``, ``matches.png``) are removed, and
+    the folder's other files are left alone. An error or an interruption before the move leaves ``out`` as
+    it was. summary.json is moved in last: a folder holding it holds one complete result.
 
     Args:
         result: the pair's matches.
         image0, image1: the loaded (H, W, 3) float images (for the picture).
         out: the pair's folder (created if needed).
         plot: also draw matches.png.
+        extra: more files of the command, by name, each with the function that writes it to a given path.
     """
     from ..viz import plot_matches
 
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(dir=out, prefix=".staging-"))
-    try:
+    extra = extra or {}
+    with replacing_owned_files(out, (*PAIR_FILES, *extra), last=SUMMARY_FILE) as staging:
+        for name, write in extra.items():
+            write(staging / name)
         save_npz(staging / MATCHES_FILE, **result.arrays())
         if plot:
-            plot_matches(image0, image1, result, staging / "matches.png")
+            plot_matches(image0, image1, result, staging / PLOT_FILE)
         if result.stages is not None:
-            save_npz(staging / "stages.npz", **result.stages)
-        save_json(staging / SUMMARY_FILE, result.summary)  # moved last: its presence marks a complete folder
-        (out / SUMMARY_FILE).unlink(missing_ok=True)
-        for item in sorted(staging.iterdir(), key=lambda p: p.name == SUMMARY_FILE):
-            os.replace(item, out / item.name)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
+            save_npz(staging / STAGES_FILE, **result.stages)
+        save_json(staging / SUMMARY_FILE, result.summary)
+
+
+def remove_pair_outputs(out: Path) -> None:
+    """Remove the files of an earlier result from a pair's folder, if it exists (summary.json first)."""
+    remove_owned_files(out, PAIR_FILES, last=SUMMARY_FILE)
 
 
 def is_complete(out: Path) -> bool:

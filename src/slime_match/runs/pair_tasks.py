@@ -13,7 +13,7 @@ from typing import Any
 from ..errors import ImageError
 from ..io import load_image
 from ..matcher import Matcher
-from .outputs import SUMMARY_FILE, write_pair_outputs
+from .outputs import SUMMARY_FILE, remove_pair_outputs, write_pair_outputs
 from .schedule import RecentImages
 
 logger = logging.getLogger("slime_match")
@@ -59,16 +59,19 @@ def finished_counts(folder: Path) -> dict[str, Any]:
 
 
 def match_one(matcher: Matcher, job: PairJob, out: Path, plot: bool) -> dict[str, Any]:
-    """Match one pair and write its folder under ``out``; a failure (bad image, bug) is recorded, not raised."""
+    """Match one pair and write its folder under ``out``; a failure (bad image, bug) is recorded, not raised,
+    and removes an earlier result's files from the pair's folder."""
     start = time.perf_counter()
     try:
         image0, image1 = load_image(job.path0), load_image(job.path1)
         result = matcher(image0, image1)
         write_pair_outputs(result, image0, image1, out / job.folder, plot=plot)
     except ImageError as error:
+        remove_pair_outputs(out / job.folder)
         return pair_record(job, "failed", seconds=round(time.perf_counter() - start, 4), error=str(error))
     except Exception as error:  # one pair must not end a long run; the record says what happened
         logger.exception("pair %s %s failed", job.name0, job.name1)
+        remove_pair_outputs(out / job.folder)
         return pair_record(job, "failed", seconds=round(time.perf_counter() - start, 4),
                            error=f"{type(error).__name__}: {error}")
     return pair_record(job, "done", len(result), result.summary["seconds"]["total"],

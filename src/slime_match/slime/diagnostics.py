@@ -32,20 +32,23 @@ def tile_count_warning(n_tiles0: int, n_tiles1: int) -> str | None:
 def empty_result_reason(counts: dict[str, int], tiles: TileConfig) -> str:
     """Which stage left no match, and why (paper Secs. 3.2-3.8), from the stage counts of ``run_slime``."""
     if counts["block_planes"] == 0:
-        return ("no block pair gave a plane (Secs. 3.2-3.3: no homography RANSAC with enough inliers): the base "
+        return ("no block pair gave a plane (no homography with enough inliers, Secs. 3.2-3.3): the base "
                 "pipeline found too few consistent matches between any two blocks")
     n_sets = counts["superset_H"]
     if counts["epipolar_kept"] == 0:
-        consensus = (f", and no epipolar geometry is shared by {tiles.min_planes} homographies (the consensus "
-                     "fallback)" if tiles.vote == "consensus" else "")
+        consensus = (f", and no single epipolar geometry is shared by {tiles.min_planes} planes (the consensus "
+                     "vote)" if tiles.vote == "consensus" else "")
         if n_sets * (n_sets - 1) <= tiles.t_xi * n_sets:
-            return (f"the epipolar vote (Sec. 3.6) cannot keep a match with only {n_sets} tile match sets: it asks "
-                    f"for more than t_xi |H| = {tiles.t_xi:g} x {n_sets} agreeing fundamental matrices out of "
-                    f"{n_sets * (n_sets - 1)}{consensus}; small images (few tiles: --min-side upsamples them) or "
-                    "scenes with few planes end here; the base pipeline alone (--method hz+) may still match them")
-        return (f"no match agreed with enough of the fundamental matrices of the {n_sets} tile match sets "
-                f"(Sec. 3.6){consensus}: the planes found do not share one epipolar geometry")
+            return (f"the epipolar vote (Sec. 3.6) cannot keep a match with only {n_sets} tile match sets: a match "
+                    f"must agree with more than {tiles.t_xi:g} x {n_sets} (t_xi |H|) of the "
+                    f"{n_sets * (n_sets - 1)} epipolar geometries (fundamental matrices) of pairs of sets"
+                    f"{consensus}; small images (few tiles: --min-side upsamples them) or scenes with few planes end "
+                    "here; the base pipeline alone (--method hz+) may still match them")
+        return (f"no match agreed with the epipolar geometries (fundamental matrices) of enough pairs of the "
+                f"{n_sets} tile match sets (Sec. 3.6){consensus}: the planes found do not share one epipolar "
+                "geometry")
     if counts["ftheta_matches"] == 0:
-        return "no tile match set survived plane fusion and the global orientation filter (Sec. 3.7)"
-    return (f"the final global DTM (Sec. 3.8) kept none of the {counts['ftheta_matches']} plane matches and "
+        return ("no tile match set survived the fusion of near-identical planes and the filter on the images' "
+                "global relative orientation (Sec. 3.7)")
+    return (f"the final global filter (DTM, Sec. 3.8) kept none of the {counts['ftheta_matches']} plane matches and "
             f"{counts['tile_matches']} tile matches")

@@ -64,13 +64,13 @@ def dtm_frame(xy0: np.ndarray, xy1: np.ndarray, size0: tuple[int, int], size1: t
     singular = np.linalg.svd(affine[:, :2], compute_uv=False)
     tilt = float(singular[0] / singular[1]) if singular[1] > 0 else float("inf")
     if tilt <= max_tilt:
-        return DTMFrame(None, own, tilt, f"image 0's own frame: the matches' affine map has tilt {tilt:.1f} "
-                                         f"<= {max_tilt:g}")
+        return DTMFrame(None, own, tilt, f"image 0's own frame: {_stretch(tilt)}, not more than {max_tilt:g} "
+                                         "(dtm_max_tilt)")
     support = xy0[inliers.ravel() > 0]
     spread = np.linalg.svd(support - support.mean(0), compute_uv=False)
     if tilt > DEGENERATE_TILT or spread[1] * DEGENERATE_TILT < spread[0]:  # nearly on a line: any stretch fits
-        return DTMFrame(None, own, tilt, f"image 0's own frame: the matches' affine map is degenerate (tilt "
-                                         f"{tilt:.1f})")
+        return DTMFrame(None, own, tilt, "image 0's own frame: the matches lie nearly on a line, so the stretch of "
+                                         f"their affine map means nothing ({_stretch(tilt)})")
     height, width = own
     corners = np.array([[0, 0], [width - 1, 0], [0, height - 1], [width - 1, height - 1]], np.float64)
     corners = corners @ affine[:, :2].T + affine[:, 2]
@@ -81,4 +81,9 @@ def dtm_frame(xy0: np.ndarray, xy1: np.ndarray, size0: tuple[int, int], size1: t
     shifted = affine.copy()
     shifted[:, 2] -= low
     return DTMFrame(shifted, (int(extent[1]), int(extent[0])), tilt,
-                    f"image 1's frame: the matches' affine map has tilt {tilt:.1f} > {max_tilt:g}")
+                    f"image 1's frame: {_stretch(tilt)}, more than {max_tilt:g} (dtm_max_tilt)")
+
+
+def _stretch(tilt: float) -> str:
+    """The tilt of the matches' affine map in words."""
+    return f"the matches' affine map stretches one direction {tilt:.1f} times more than the other (its tilt)"

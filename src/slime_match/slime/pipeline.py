@@ -210,8 +210,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         sources: list[tuple[float, int, int, int]] = []  # per tilt: views, its planes' index range
         for tilt in views.tilts:
             if views.mode == "auto":
-                record.reason = _geometry_found(selection, views)
-                if record.reason:
+                found_enough, record.reason = _geometry_support(selection, views)
+                if found_enough:
                     break
             with timer("views"), torch_threads(1):
                 found = view_planes(pipeline, image0, tilt, features.levels[1], layout.blocks1, config.blocks,
@@ -225,16 +225,17 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
             logger.info("Views of tilt %g: %d views, %d planes", tilt, found.views, len(found.planes.H))
             expansion, selection = _select(planes, layout, config, workers, timer)
         else:
-            record.reason = _geometry_found(selection, views) if views.mode == "auto" else "every tilt tried"
-            if not record.reason:  # the views found no stronger geometry either: their planes only compete
+            found_enough, record.reason = _geometry_support(selection, views)
+            if views.mode != "auto":
+                record.reason = "every tilt tried"
+            elif not found_enough:  # the views found no stronger geometry either: their planes only compete
                 planes, expansion, selection = plain
-                record.reason = (f"no tilt gave F^theta {views.min_support} matches: the planes of the image "
-                                 "alone are kept")
+                record.reason = f"every tilt tried, and still {record.reason}: the planes of the image alone are kept"
         record.found = [{"tilt": tilt, "views": count, "planes": stop - start,
                          **_views_in_ftheta(selection.ftheta, planes.level_matches.pairs[:, 0], blocks0, start, stop)}
                         for tilt, count, start, stop in sources]
         logger.info("Views: %s", record.reason)
-    logger.info("Sec. 3.6: %s", selection.vote_reason)
+    logger.info("Epipolar vote (Sec. 3.6): %s", selection.vote_reason)
     table = planes.table
     ftheta = selection.ftheta
     in_ftheta = ftheta.union()
@@ -290,10 +291,13 @@ def _views_in_ftheta(ftheta: TileSets, block0_of_plane: np.ndarray, blocks0: lis
     return {"ftheta_matches": int(ftheta.subset(ours).union().sum()), "ftheta_by_angle": by_angle}
 
 
-def _geometry_found(selection: PlaneSelection, views: ViewConfig) -> str:
-    """Why the run needs no more views ("" when it does): F^theta holds ``views.min_support`` matches."""
+def _geometry_support(selection: PlaneSelection, views: ViewConfig) -> tuple[bool, str]:
+    """Whether the run has enough geometry to need no more views (F^theta holds ``views.min_support``
+    matches), and the count in words."""
     support = int(selection.ftheta.union().sum())
-    return f"F^theta has {support} matches (>= {views.min_support})" if support >= views.min_support else ""
+    enough = support >= views.min_support
+    return enough, (f"{'enough' if enough else 'too few'} matches consistent with the planes' epipolar geometry "
+                    f"(F^theta): {support} {'>=' if enough else '<'} {views.min_support}")
 
 
 def _workers(requested: int | None) -> int:

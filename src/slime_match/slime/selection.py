@@ -94,15 +94,18 @@ def _epipolar_selection(table: MatchTable, superset: TileSets, config: TileConfi
     keep = epipolar_consistency(table, superset, t_perp=config.t_perp, t_xi=config.t_xi, min_union=config.min_union,
                                 chunk=config.chunk, threads=threads, pairs=pairs)
     n_planes = _homographies(superset, keep, config.t_ov)
-    kept = f"the paper's vote kept {int(keep.sum())} matches on {n_planes} homographies"
+    kept = (f"the paper's epipolar vote kept {int(keep.sum())} matches consistent with the epipolar geometry of "
+            f"enough pairs of planes (M+), on {n_planes} planes")
     if config.vote == "paper":
-        return keep, "paper", f"{kept} (vote=paper)", n_planes
+        return keep, "paper", f"{kept} (the paper's vote was asked for: vote=paper)", n_planes
     if keep.sum() >= config.min_union:
         return keep, "paper", kept, n_planes
     found = epipolar_consensus(table, superset, t_perp=config.t_perp, min_union=config.min_union, t_ov=config.t_ov,
                                min_planes=config.min_planes, pairs=pairs)
-    weak = f"{kept} (fewer than min_union={config.min_union})"
+    weak = f"{kept}: too few, {int(keep.sum())} < {config.min_union} (min_union)"
     if not found.keep.any():
-        return keep, "paper", f"{weak}, and no epipolar geometry has {config.min_planes} homographies", n_planes
-    chosen = f"the largest consistent geometry has {found.planes} homographies, {int(found.keep.sum())} matches"
+        return keep, "paper", (f"{weak}, and no single epipolar geometry is shared by {config.min_planes} planes "
+                               "(min_planes): the vote's matches are kept"), n_planes
+    chosen = (f"the largest group of planes sharing one epipolar geometry has {found.planes} planes and "
+              f"{int(found.keep.sum())} matches, and is kept (consensus vote)")
     return found.keep, "consensus", f"{weak}; {chosen}", found.planes

@@ -11,6 +11,7 @@ from matplotlib.patches import Rectangle
 
 from ..errors import SlimeMatchError
 from ..io import load_image, load_npz, save_figure
+from ..output_folder import replacing_owned_files
 from ..viz import draw_matches, pair_figure, side_by_side
 
 STAGE_KEYS = {  # each picture and the stages.npz arrays it reads
@@ -65,34 +66,38 @@ def render_stages(stages_path: str | os.PathLike, image0, image1, out_dir: str |
     data = load_npz(stages_path, "stages file", required, hint="; write it with `slime match --save-stages`")
     img0, img1 = load_image(image0), load_image(image1)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    written = []
-    for name in names:
-        figure = pair_figure(img0, img1)
-        ax = figure.subplots()
-        if name in ("blocks", "tiles"):
-            canvas, offset = side_by_side(img0, img1)
-            ax.imshow(canvas)
-            ax.set_axis_off()
-            _draw_boxes(ax, data[f"{name}0"], 0.0)
-            _draw_boxes(ax, data[f"{name}1"], offset)
-            ax.set_title(f"{name}: {len(data[f'{name}0'])} / {len(data[f'{name}1'])} (cores, colour = scale)",
-                         fontsize=9)
-        elif name == "planes":
-            plane = data["block_matches_plane"]
-            draw_matches(ax, img0, img1, data["block_matches_xy0"], data["block_matches_xy1"],
-                         _set_colors(plane), title=f"block-pair planes M_l: {len(data['planes_H'])} planes, "
-                                                  f"{len(plane)} matches (colour = plane)")
-        elif name in ("superset", "fbar", "ftheta"):
-            rows, set_id = _sets_to_rows(data, name)
-            titles = {"superset": "superset H", "fbar": "F-bar", "ftheta": "F^theta (fused, oriented)"}
-            draw_matches(ax, img0, img1, data["table_xy0"][rows], data["table_xy1"][rows], _set_colors(set_id),
-                         title=f"{titles[name]}: {int(set_id.max(initial=-1)) + 1} sets, {len(rows)} entries")
-        else:
-            key = "tile_matches" if name == "tile_matches" else "final"
-            draw_matches(ax, img0, img1, data[f"{key}_xy0"], data[f"{key}_xy1"],
-                         title=f"{name}: {len(data[f'{key}_xy0'])} matches")
-        target = out / f"{name}.png"
-        save_figure(target, figure)
-        written.append(target)
-    return written
+    with replacing_owned_files(out, [f"{name}.png" for name in STAGES]) as staging:
+        for name in names:
+            save_figure(staging / f"{name}.png", _stage_figure(name, data, img0, img1))
+    return [out / f"{name}.png" for name in names]
+
+
+def _stage_figure(name: str, data: dict[str, np.ndarray], img0: np.ndarray, img1: np.ndarray):
+    """The figure of one stage of :data:`STAGES` from the arrays of a ``stages.npz``."""
+    figure = pair_figure(img0, img1)
+    ax = figure.subplots()
+    if name in ("blocks", "tiles"):
+        canvas, offset = side_by_side(img0, img1)
+        ax.imshow(canvas)
+        ax.set_axis_off()
+        _draw_boxes(ax, data[f"{name}0"], 0.0)
+        _draw_boxes(ax, data[f"{name}1"], offset)
+        ax.set_title(f"{name}: {len(data[f'{name}0'])} / {len(data[f'{name}1'])} (cores, colour = scale)",
+                     fontsize=9)
+    elif name == "planes":
+        plane = data["block_matches_plane"]
+        draw_matches(ax, img0, img1, data["block_matches_xy0"], data["block_matches_xy1"],
+                     _set_colors(plane), title=f"planes of the block pairs (M_l): {len(data['planes_H'])} "
+                                              f"planes, {len(plane)} matches (colour = plane)")
+    elif name in ("superset", "fbar", "ftheta"):
+        rows, set_id = _sets_to_rows(data, name)
+        titles = {"superset": "tile match sets of every plane (superset H)",
+                  "fbar": "the largest sets, one per tile (F-bar)",
+                  "ftheta": "sets fused and at the global orientation (F^theta)"}
+        draw_matches(ax, img0, img1, data["table_xy0"][rows], data["table_xy1"][rows], _set_colors(set_id),
+                     title=f"{titles[name]}: {int(set_id.max(initial=-1)) + 1} sets, {len(rows)} entries")
+    else:
+        key = "tile_matches" if name == "tile_matches" else "final"
+        draw_matches(ax, img0, img1, data[f"{key}_xy0"], data[f"{key}_xy1"],
+                     title=f"{name}: {len(data[f'{key}_xy0'])} matches")
+    return figure

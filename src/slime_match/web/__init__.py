@@ -22,18 +22,20 @@ def is_loopback(host: str) -> bool:
 
 def serve(host: str = "127.0.0.1", port: int = 8000, images: list[str | os.PathLike] = (),
           runs: list[str | os.PathLike] = (), annotations: str | os.PathLike | None = None,
-          max_upload_mb: float | None = None) -> None:
+          max_upload_mb: float | None = None, max_megapixels: float | None = None) -> None:
     """Run the app with uvicorn until Ctrl-C (see :func:`slime_match.web.app.create_app`)."""
     try:
         import uvicorn
 
         from .app import LOOPBACK_HOSTS, MAX_UPLOAD_MB, create_app
+        from .image_checks import MAX_IMAGE_PIXELS
     except ImportError as error:
         raise SlimeMatchError(f"slime web needs FastAPI and uvicorn ({error.name} is missing): "
                               "pip install 'slime-match[web]'") from None
     loopback = is_loopback(host)
     app = create_app(images, runs, annotations, MAX_UPLOAD_MB if max_upload_mb is None else max_upload_mb,
-                     allowed_hosts=LOOPBACK_HOSTS if loopback else None)
+                     allowed_hosts=LOOPBACK_HOSTS if loopback else None,
+                     max_megapixels=MAX_IMAGE_PIXELS / 1e6 if max_megapixels is None else max_megapixels)
     if not loopback:
         print(f"warning: listening on {host}: any machine that reaches it can read the served folders and run "
               "matches (there is no login); use 127.0.0.1 unless the network is yours")

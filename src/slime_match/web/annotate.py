@@ -1,6 +1,5 @@
-"""The ground-truth correspondence tool's geometry and files: point pairs clicked in two images, grouped in
-sets (one plane each), a homography per set and a fundamental matrix of them all, saved in the formats that
-``slime bench`` reads: a WxBS pair folder (``01.*``, ``02.*``, ``corrs.txt``, rows ``x0 y0 x1 y1``) or a
+"""The ground-truth correspondence tool's files: point pairs clicked in two images, grouped in sets (one plane
+each; their models are in :mod:`.annotation_models`), saved in the formats that ``slime bench`` reads: a WxBS pair folder (``01.*``, ``02.*``, ``corrs.txt``, rows ``x0 y0 x1 y1``) or a
 planar pair (``<name>1.*``, ``<name>2.*`` and the 3x3 homography ``<name>_H12.txt``, image 1 -> 2).
 
 A pair may be marked occluded (the point is seen in one image only): it is kept in the tool's own
@@ -15,15 +14,13 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from ..errors import ConfigError
 from ..eval.datasets.files import find_image, read_matrix
-from ..eval.datasets.pair import fundamental_from_corrs
-from ..io import IMAGE_EXTS, save_json, save_text
+from ..io import save_json, save_text
+from .annotation_models import corrs_array, fundamental_check, homography_check
 
-MIN_H, MIN_F = 4, 8  # pairs for a homography, for a fundamental matrix
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
 MODELS = ("H", "F")
 
@@ -58,71 +55,6 @@ def read_pairs(items: Any) -> list[dict[str, Any]]:
     return pairs
 
 
-def corrs_array(pairs: list[dict[str, Any]], group: int | None = None) -> np.ndarray:
-    """(M, 4) ``x0 y0 x1 y1`` of the visible pairs (of one set when ``group`` is given)."""
-    rows = [[p["x0"], p["y0"], p["x1"], p["y1"]] for p in pairs
-            if not p["occluded"] and (group is None or p["set"] == group)]
-    return np.asarray(rows, np.float64).reshape(-1, 4)
-
-
-def homography(corrs: np.ndarray) -> np.ndarray | None:
-    """H (image 0 -> 1) of all the correspondences (least squares), None under 4 or when degenerate."""
-    if len(corrs) < MIN_H:
-        return None
-    H, _ = cv2.findHomography(corrs[:, :2], corrs[:, 2:], 0)
-    if H is None or not np.all(np.isfinite(H)) or abs(H[2, 2]) < 1e-12:
-        return None
-    return H / H[2, 2]
-
-
-def fundamental(corrs: np.ndarray) -> np.ndarray | None:
-    """F (``x1^T F x0 = 0``) by the normalised 8-point algorithm that ``slime bench`` applies to a WxBS
-    ``corrs.txt``; None under 8 or when degenerate."""
-    if len(corrs) < MIN_F:
-        return None
-    try:
-        return fundamental_from_corrs(corrs)
-    except ConfigError:
-        return None
-
-
-def transfer_errors(H: np.ndarray, corrs: np.ndarray) -> np.ndarray:
-    """|H x0 - x1| in px of each correspondence."""
-    x0 = np.c_[corrs[:, :2], np.ones(len(corrs))] @ H.T
-    return np.linalg.norm(x0[:, :2] / x0[:, 2:3] - corrs[:, 2:], axis=1)
-
-
-def epipolar_errors(F: np.ndarray, corrs: np.ndarray) -> np.ndarray:
-    """Distance in px of each x1 to the epipolar line F x0 (in image 1)."""
-    x0 = np.c_[corrs[:, :2], np.ones(len(corrs))]
-    x1 = np.c_[corrs[:, 2:], np.ones(len(corrs))]
-    lines = x0 @ F.T
-    return np.abs(np.sum(lines * x1, axis=1)) / np.maximum(np.hypot(lines[:, 0], lines[:, 1]), 1e-12)
-
-
-def fit(pairs: list[dict[str, Any]]) -> dict[str, Any]:
-    """Each set's H (>= 4 visible pairs), H and F of all visible pairs (>= 4, >= 8), and every pair's
-    residuals: to its set's H and to F (None where there is no model or the pair is occluded)."""
-    sets = sorted({p["set"] for p in pairs})
-    set_H = {g: homography(corrs_array(pairs, g)) for g in sets}
-    everything = corrs_array(pairs)
-    H, F = homography(everything), fundamental(everything)
-    residual_H, residual_F = [], []
-    for p in pairs:
-        if p["occluded"]:
-            residual_H.append(None)
-            residual_F.append(None)
-            continue
-        row = np.array([[p["x0"], p["y0"], p["x1"], p["y1"]]])
-        own = set_H.get(p["set"])
-        residual_H.append(None if own is None else round(float(transfer_errors(own, row)[0]), 3))
-        residual_F.append(None if F is None else round(float(epipolar_errors(F, row)[0]), 3))
-    return {"visible": len(everything), "set_H": {str(g): None if h is None else h.tolist() for g, h in set_H.items()},
-            "H": None if H is None else H.tolist(), "F": None if F is None else F.tolist(),
-            "residual_H": residual_H, "residual_F": residual_F,
-            "min_pairs": {"H": MIN_H, "F": MIN_F}}
-
-
 def corrs_text(pairs: list[dict[str, Any]]) -> str:
     """The WxBS ``corrs.txt`` of the visible pairs: one ``x0 y0 x1 y1`` row each."""
     corrs = corrs_array(pairs)
@@ -139,14 +71,13 @@ def export_text(pairs: list[dict[str, Any]], model: str) -> tuple[str, str]:
     check_model(model)
     corrs = corrs_array(pairs)
     if model == "F":
-        if fundamental(corrs) is None:
-            raise AnnotationError(f"a WxBS corrs.txt needs at least {MIN_F} visible pairs in general position "
-                                  f"(its F is their 8-point fit); there are {len(corrs)}")
+        _, why = fundamental_check(corrs)
+        if why is not None:
+            raise AnnotationError(f"a WxBS corrs.txt is read as the 8-point F of its pairs: {why}")
         return "corrs.txt", corrs_text(pairs)
-    H = homography(corrs)
-    if H is None:
-        raise AnnotationError(f"a homography needs at least {MIN_H} visible pairs, no three on a line; there are "
-                              f"{len(corrs)}")
+    H, why = homography_check(corrs)
+    if why is not None:
+        raise AnnotationError(f"a planar pair's file is the H of its pairs: {why}")
     return "H12.txt", matrix_text(H)
 
 
@@ -212,7 +143,9 @@ def save(folder: Path, name: str, model: str, image0: Path, image1: Path, pairs:
 
 def open_file(path: Path) -> dict[str, Any]:
     """An annotation from the files the bench reads: a WxBS ``corrs.txt`` (with ``01.*`` and ``02.*``
-    beside it) or a planar ``<scene>_H1<k>.txt`` (with ``<scene>1.*`` and ``<scene><k>.*``); the tool's
+    beside it), a planar ``<scene>_H1<k>.txt`` (with ``<scene>1.*`` and ``<scene><k>.*``), an Oxford
+    ``H1to<k>p`` (with ``img1.*`` and ``img<k>.*``) or an EVD ``h/<name>.txt`` (with ``1/<name>.*`` and
+    ``2/<name>.*``); the tool's
     ``annotation.json`` beside them, when there is one, brings back the sets and the occluded points.
 
     Returns:
@@ -234,21 +167,44 @@ def open_file(path: Path) -> dict[str, Any]:
         sidecar = path.parent / "annotation.json"
         return {"kind": "wxbs", "image0": image0, "image1": image1, "H": None,
                 "pairs": _recorded_pairs(sidecar, corrs) or pairs}
-    match = re.fullmatch(r"(?P<scene>.+)_H1(?P<k>\d+)\.txt", path.name)
-    if match is None or path.suffix.lower() in IMAGE_EXTS:
-        raise AnnotationError(f"{path.name} is neither a WxBS corrs.txt nor a planar '<scene>_H1<k>.txt' file")
-    scene, k = match["scene"], match["k"]
-    image0 = find_image(path.parent, f"{scene}1") or find_image(path.parent, f"{scene.removesuffix('rot')}1")
-    image1 = find_image(path.parent, f"{scene}{k}")
-    if image0 is None or image1 is None:
-        raise AnnotationError(f"{path.name}: the images {scene}1.* and {scene}{k}.* are not beside it")
+    planar = _planar_images(path)
+    if planar is None:
+        raise AnnotationError(f"{path.name} is none of the ground truths the bench reads: a WxBS corrs.txt, a "
+                              "planar '<scene>_H1<k>.txt', an Oxford 'H1to<k>p' or an EVD 'h/<name>.txt'")
+    image0, image1, sidecar = planar
     try:
         H = read_matrix(path)
     except (ValueError, ConfigError) as error:
         raise AnnotationError(f"{path.name} is not a 3x3 matrix: {error}") from None
-    sidecar = path.parent / f"{scene}_annotation.json"
     return {"kind": "planar", "image0": image0, "image1": image1, "H": H.tolist(),
-            "pairs": _recorded_pairs(sidecar, None) or []}
+            "pairs": (_recorded_pairs(sidecar, None) if sidecar else None) or []}
+
+
+def _planar_images(path: Path) -> tuple[Path, Path, Path | None] | None:
+    """(image 0, image 1, the tool's record beside them or None) of a homography file in one of the bench's
+    planar layouts, None for a file in none of them.
+
+    Raises:
+        AnnotationError: a homography file whose images are missing.
+    """
+    folder = path.parent
+    if (match := re.fullmatch(r"(?P<scene>.+)_H1(?P<k>\d+)\.txt", path.name)) is not None:  # planar
+        scene, k = match["scene"], match["k"]
+        names = (f"{scene}1", f"{scene}{k}")
+        image0 = find_image(folder, names[0]) or find_image(folder, f"{scene.removesuffix('rot')}1")
+        image1, sidecar = find_image(folder, names[1]), folder / f"{scene}_annotation.json"
+    elif (match := re.fullmatch(r"H1to(?P<k>\d+)p", path.name)) is not None:  # Oxford
+        names = ("img1", f"img{match['k']}")
+        image0, image1, sidecar = find_image(folder, names[0]), find_image(folder, names[1]), None
+    elif folder.name == "h" and path.suffix == ".txt":  # EVD: 1/<name>.*, 2/<name>.*, h/<name>.txt
+        names = (f"1/{path.stem}", f"2/{path.stem}")
+        image0, image1 = find_image(folder.parent / "1", path.stem), find_image(folder.parent / "2", path.stem)
+        sidecar = None
+    else:
+        return None
+    if image0 is None or image1 is None:
+        raise AnnotationError(f"{path.name}: the images {names[0]}.* and {names[1]}.* are missing")
+    return image0, image1, sidecar
 
 
 def _recorded_pairs(sidecar: Path, corrs: np.ndarray | None) -> list[dict[str, Any]] | None:

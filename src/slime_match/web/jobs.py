@@ -40,6 +40,8 @@ class Job:
         folder: where the worker writes the pair's files.
         status: "queued", "running", "done", "failed" or "cancelled".
         stages: ``{"name", "seconds"}`` in the order they started; seconds is None while a stage runs.
+        notices: the warnings the worker logged while it ran (numba compiling on first use, weights passed
+            over...).
     """
 
     id: str
@@ -48,6 +50,7 @@ class Job:
     folder: Path
     status: str = "queued"
     stages: list[dict[str, Any]] = field(default_factory=list)
+    notices: list[str] = field(default_factory=list)
     error: str | None = None
     counts: dict[str, Any] = field(default_factory=dict)
     created: float = field(default_factory=time.time)
@@ -60,7 +63,8 @@ class Job:
         now = time.time()
         elapsed = None if self.started is None else round((self.finished or now) - self.started, 2)
         return {"id": self.id, "status": self.status, "images": self.images, "preset": self.preset,
-                "stages": self.stages, "error": self.error, "counts": self.counts, "elapsed": elapsed,
+                "stages": self.stages, "notices": self.notices, "error": self.error, "counts": self.counts,
+                "elapsed": elapsed, "number": self.number, "created": self.created,
                 "has_stages": (self.folder / "stages.npz").is_file() if self.status == "done" else False}
 
 
@@ -79,6 +83,7 @@ class JobRunner:
         self._current: str | None = None
         self._pending: list[tuple[str, dict, str, str]] = []
         self._numbers = itertools.count(1)
+        self._by_key: dict[str, str] = {}  # a client's request key -> its job
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._watch, name="slime-web-jobs", daemon=True)
         self._thread.start()
@@ -86,11 +91,16 @@ class JobRunner:
     # -- the API's side
 
     def submit(self, config: dict[str, Any], path0: Path, path1: Path, images: list[dict[str, Any]],
-               preset: str) -> Job:
-        """Queue a match of ``path0`` and ``path1`` with ``config`` (``MatchConfig.to_dict()``)."""
-        job_id = uuid.uuid4().hex[:12]
-        job = Job(job_id, images, preset, self.folder / job_id, number=next(self._numbers))
+               preset: str, key: str | None = None) -> Job:
+        """Queue a match of ``path0`` and ``path1`` with ``config`` (``MatchConfig.to_dict()``); a request
+        ``key`` seen before gives that request's job again (one job per click, however often it is sent)."""
         with self._lock:
+            if key is not None and self._by_key.get(key) in self.jobs:
+                return self.jobs[self._by_key[key]]
+            job_id = uuid.uuid4().hex[:12]
+            job = Job(job_id, images, preset, self.folder / job_id, number=next(self._numbers))
+            if key is not None:
+                self._by_key[key] = job_id
             self.jobs[job_id] = job
             self._pending.append((job_id, config, str(path0), str(path1)))
             self._forget_old()
@@ -100,6 +110,11 @@ class JobRunner:
     def get(self, job_id: str) -> Job | None:
         with self._lock:
             return self.jobs.get(job_id)
+
+    def listed(self) -> list[Job]:
+        """The jobs kept, the newest first."""
+        with self._lock:
+            return sorted(self.jobs.values(), key=lambda job: -job.number)
 
     def cancel(self, job_id: str) -> Job | None:
         """Stop a queued or running job (a running one stops its worker; the next job starts a new one)."""
@@ -132,6 +147,7 @@ class JobRunner:
         for job in finished[:max(0, len(finished) - KEPT_JOBS)]:
             shutil.rmtree(job.folder, ignore_errors=True)
             del self.jobs[job.id]
+        self._by_key = {key: job_id for key, job_id in self._by_key.items() if job_id in self.jobs}
 
     def _start_worker(self) -> None:
         self._tasks, self._events = self._context.Queue(), self._context.Queue()
@@ -201,6 +217,9 @@ class JobRunner:
         job = self.jobs.get(job_id)
         if job is None or job.status != "running":
             return
+        if kind == "notice":
+            job.notices.append(event[2])
+            return
         if kind == "stage":
             _, _, stage, seconds = event
             if seconds is None:
@@ -233,12 +252,15 @@ def _worker_main(tasks, events) -> None:
     from ..matcher import Matcher
     from ..runs.outputs import write_pair_outputs
 
+    current = {"job": None}
+    logging.getLogger("slime_match").addHandler(NoticeHandler(events, current))
     matcher, matcher_key = None, None
     while True:
         task = tasks.get()
         if task is None:
             return
         job_id, config_dict, path0, path1, out = task
+        current["job"] = job_id
 
         def tell(stage: str, seconds: float | None, job_id=job_id) -> None:
             events.put(("stage", job_id, stage, seconds))
@@ -265,3 +287,15 @@ def _worker_main(tasks, events) -> None:
         except Exception as error:  # one bad job must not end the worker
             logger.exception("match job %s failed", job_id)
             events.put(("failed", job_id, f"{type(error).__name__}: {error}"))
+
+
+class NoticeHandler(logging.Handler):
+    """Sends the worker's warnings to the job that runs (``current["job"]``) as notices."""
+
+    def __init__(self, events, current: dict[str, str | None]) -> None:
+        super().__init__(logging.WARNING)
+        self.events, self.current = events, current
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if self.current["job"] is not None:
+            self.events.put(("notice", self.current["job"], record.getMessage()))

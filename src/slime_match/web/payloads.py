@@ -38,6 +38,7 @@ def matches_payload(folder: Path) -> dict[str, Any]:
         "keypoints0": _points(result.keypoints0),
         "keypoints1": _points(result.keypoints1),
         "scores": np.round(result.scores, 5).tolist(),
+        "confidence": np.round(result.confidence, 5).tolist(),
         "inliers": None if result.inliers is None else np.asarray(result.inliers, bool).astype(int).tolist(),
         "kind": result.geometry_kind,
         "model": None if result.model is None else np.asarray(result.model, np.float64).tolist(),
