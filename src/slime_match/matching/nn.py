@@ -148,6 +148,20 @@ def _to_matches(idx0: torch.Tensor, idx1: torch.Tensor, scores: torch.Tensor) ->
     return Matches(idx0.cpu().numpy()[order], idx1.cpu().numpy()[order], s[order])
 
 
+def _check_ratio(ratio: float) -> None:
+    if not 0 < ratio <= 1:
+        raise ConfigError(f"ratio must be in (0, 1], got {ratio}")
+
+
+def _nn_ratio(desc0: torch.Tensor, desc1: torch.Tensor, k_cols: int,
+              block_size: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Each row's two nearest columns (N, 2) (one when M < 2), each column's ``k_cols`` nearest rows, and the
+    (N,) ratio d1 / d2 (d2 = inf when M < 2)."""
+    dist, idx, _, col_idx = knn(desc0, desc1, 2, k_cols, block_size)
+    second = dist[:, 1] if dist.shape[1] > 1 else torch.full_like(dist[:, 0], float("inf"))
+    return idx, col_idx, _ratio(dist[:, 0], second)
+
+
 def match_nn_ratio(desc0: torch.Tensor, desc1: torch.Tensor, ratio: float = 0.8,
                    block_size: int = DEFAULT_BLOCK) -> Matches:
     """Lowe's nearest-neighbour ratio test.
@@ -159,13 +173,10 @@ def match_nn_ratio(desc0: torch.Tensor, desc1: torch.Tensor, ratio: float = 0.8,
     Returns:
         Matches with score d1 / d2, ascending.
     """
-    if not 0 < ratio <= 1:
-        raise ConfigError(f"ratio must be in (0, 1], got {ratio}")
+    _check_ratio(ratio)
     if desc0.shape[0] == 0 or desc1.shape[0] == 0:
         return Matches.empty()
-    dist, idx, _, _ = knn(desc0, desc1, 2, 0, block_size)
-    second = dist[:, 1] if dist.shape[1] > 1 else torch.full_like(dist[:, 0], float("inf"))
-    score = _ratio(dist[:, 0], second)
+    idx, _, score = _nn_ratio(desc0, desc1, 0, block_size)
     keep = torch.nonzero(score < ratio).flatten()
     return _to_matches(keep, idx[keep, 0], score[keep])
 
@@ -195,13 +206,10 @@ def match_mutual_nn_ratio(desc0: torch.Tensor, desc1: torch.Tensor, ratio: float
     Returns:
         Matches with score d1 / d2, ascending.
     """
-    if not 0 < ratio <= 1:
-        raise ConfigError(f"ratio must be in (0, 1], got {ratio}")
+    _check_ratio(ratio)
     if desc0.shape[0] == 0 or desc1.shape[0] == 0:
         return Matches.empty()
-    dist, idx, _, col_idx = knn(desc0, desc1, 2, 1, block_size)
-    second = dist[:, 1] if dist.shape[1] > 1 else torch.full_like(dist[:, 0], float("inf"))
-    score = _ratio(dist[:, 0], second)
+    idx, col_idx, score = _nn_ratio(desc0, desc1, 1, block_size)
     ok = col_idx[idx[:, 0], 0] == torch.arange(desc0.shape[0], device=idx.device)
     if ratio < 1:
         ok &= score < ratio
