@@ -102,6 +102,15 @@ def device(request) -> torch.device:
     return torch.device(request.param)
 
 
+@pytest.fixture
+def one_torch_thread():
+    """Torch on one thread for the test: networks on small images run about as fast, and spare a busy machine."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 def require(path: Path) -> Path:
     """Skip the calling test when a data file it reads is absent (e.g. a user's clone)."""
     if not path.exists():

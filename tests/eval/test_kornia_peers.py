@@ -18,13 +18,7 @@ from slime_match.eval.kornia_peers import KorniaLoFTR, fit_size, frame_of, resiz
 H, W = 96, 128
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """These networks run on tiny images: one thread is faster than two, and spares a busy machine."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _pair() -> tuple[np.ndarray, np.ndarray]:

@@ -26,13 +26,7 @@ NEEDS = {"aliked-lg": ("aliked-n16", "lightglue-aliked"), "aliked-nn": ("aliked-
          "xfeat-lg": ("xfeat", "lightglue-xfeat"), "xfeat-nn": ("xfeat",)}
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Small images: one thread is about as fast as two, and spares a busy machine."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 # ------------------------------------------------------------------------------------------ configuration

@@ -150,3 +150,14 @@ def browser(server):
     driver.set_window_size(2 * 1400 - width, 2 * 900 - height)
     yield driver
     driver.quit()
+
+
+def wait(client, job_id: str, timeout: float = 120.0) -> dict:
+    """The state of a web job once it has left "queued" / "running" (fails after ``timeout`` s)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        state = client.get(f"/api/jobs/{job_id}").json()
+        if state["status"] not in ("queued", "running"):
+            return state
+        time.sleep(0.2)
+    raise AssertionError(f"job {job_id} did not finish in {timeout} s")

@@ -6,7 +6,6 @@ from __future__ import annotations
 import io
 import json
 import os
-import time
 
 import cv2
 import numpy as np
@@ -22,7 +21,7 @@ from slime_match.eval.datasets.wxbs import read_wxbs
 from slime_match.web import is_loopback
 from slime_match.web.app import create_app
 
-from .conftest import MANY, PLANAR_H, SECOND_H
+from .conftest import MANY, PLANAR_H, SECOND_H, wait
 
 POST = {"X-Slime-Web": "1"}
 
@@ -45,16 +44,6 @@ def ref(path: str, root: str = "images") -> dict:
 def png_bytes(width: int = 64, height: int = 48) -> bytes:
     image = np.random.default_rng(1).integers(0, 255, (height, width, 3), dtype=np.uint8)
     return cv2.imencode(".png", image)[1].tobytes()
-
-
-def wait(client, job_id: str, timeout: float = 120.0) -> dict:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        state = client.get(f"/api/jobs/{job_id}").json()
-        if state["status"] not in ("queued", "running"):
-            return state
-        time.sleep(0.2)
-    raise AssertionError(f"job {job_id} did not finish in {timeout} s")
 
 
 def planar_pairs(n: int, noise: float = 0.0, off_plane: int = 0) -> list[dict]:

@@ -5,7 +5,6 @@ job per click, a job list, no server path in any answer, and one JSON shape for 
 from __future__ import annotations
 
 import struct
-import time
 import zlib
 
 import pytest
@@ -16,6 +15,8 @@ from fastapi.testclient import TestClient
 
 from slime_match.web.app import create_app
 from slime_match.web.match_options import server_cpus
+
+from .conftest import wait
 
 POST = {"X-Slime-Web": "1"}
 
@@ -97,16 +98,6 @@ def test_errors_have_one_json_shape(client, web_images):
     with TestClient(other, base_url="http://evil.example") as evil:
         refused = evil.get("/api/info")
         assert refused.status_code == 400 and set(refused.json()) == {"error"}
-
-
-def wait(client, job_id: str, timeout: float = 120.0) -> dict:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        state = client.get(f"/api/jobs/{job_id}").json()
-        if state["status"] not in ("queued", "running"):
-            return state
-        time.sleep(0.2)
-    raise AssertionError(f"job {job_id} did not finish in {timeout} s")
 
 
 def test_one_job_per_click_a_job_list_and_no_server_path_in_a_failure(client, web_images, folder):
