@@ -23,8 +23,8 @@ fi
 DATA="${DATA:-${SLIME_MATCH_DATA:-../shared/data}}"
 OUT="${OUT:-results/full}"
 OUT_HARD="${OUT_HARD:-results/hard}"
-METHODS="${METHODS:-slime;slime-upright;hz+;slime-keynet;keynet;slime-rootsift;rootsift;opencv-sift}"
-HARD_METHODS="${HARD_METHODS:-slime;slime:views=off;hz+;asift;opencv-sift:rootsift=true,mutual=true}"
+METHODS="${METHODS:-slime;slime-upright;hz+;slime-keynet;keynet;slime-rootsift;rootsift;opencv-sift;aliked-lg}"
+HARD_METHODS="${HARD_METHODS:-slime;slime:views=off;hz+;asift;opencv-sift:rootsift=true,mutual=true;aliked-lg}"
 python -m slime_match.eval.bench graf hpatches scannet-sample motorcycle --data-root "$DATA" \
     --rotations 90,180,270 --thresholds none,5,3,2,1 --seed 0 --methods "$METHODS" -o "$OUT" "$@"
 python -m slime_match.eval.bench "evd:$DATA/hard/evd" "wxbs:$DATA/hard/wxbs" --thresholds none --map-pairs 0 \

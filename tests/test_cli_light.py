@@ -43,8 +43,11 @@ def test_the_parser_offers_what_the_code_accepts():
     assert choices.DESCRIPTOR_CHOICES == ("auto", *DESCRIPTOR_METHODS)
     match = build_parser()._subparsers._group_actions[0].choices["match"]
     offered = {action.dest: tuple(action.choices) for action in match._actions if action.choices}
-    assert offered["ransac"] == choices.RANSAC_CHOICES and offered["method"] == ("slime", *BASE_NAMES)
-    assert offered["base"] == choices.BUILTIN_BASES  # the learned bases run alone
+    from slime_match.config import PRESETS
+
+    assert offered["ransac"] == choices.RANSAC_CHOICES and offered["method"] == tuple(PRESETS)
+    assert set(methods()) <= set(PRESETS)  # Slime and every base alone, by its name
+    assert offered["base"] == BASE_NAMES
     assert offered["detection"] == choices.DETECTIONS and offered["tile_test"] == choices.TILE_TESTS
 
 

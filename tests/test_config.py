@@ -7,7 +7,8 @@ import pytest
 
 import slime_match as sm
 from slime_match._runtime.options import config_from_dict, option_paths, parse_value, set_option
-from slime_match.config import MatchConfig, option_path, with_options
+from slime_match.choices import PRESET_NAMES
+from slime_match.config import PRESETS, MatchConfig, option_path, with_options
 from slime_match.slime.blocks import BlockConfig
 from slime_match.slime.pipeline import SlimeConfig
 from slime_match.slime.tile_sets import TileConfig
@@ -64,6 +65,8 @@ def test_set_option_refuses_unknown_paths_and_bad_values(path, value, message):
 def test_each_dataclass_checks_its_own_values():
     with pytest.raises(sm.ConfigError, match="invalid detection 'tile'"):
         SlimeConfig(detection="tile")
+    with pytest.raises(sm.ConfigError, match="invalid block_matching 'image'"):
+        SlimeConfig(block_matching="image")
     with pytest.raises(sm.ConfigError, match="invalid device 'tpu'"):
         MatchConfig(device="tpu")
     with pytest.raises(sm.ConfigError, match="min_plane_matches must be an integer of at least 4"):
@@ -74,6 +77,12 @@ def test_each_dataclass_checks_its_own_values():
     config.slime.tile_test = "edge"  # set after construction: validate (as the Matcher does) finds it
     with pytest.raises(sm.ConfigError, match="invalid tile_test"):
         config.validate()
+
+
+def test_every_preset_builds_and_the_command_line_offers_each():
+    assert tuple(PRESETS) == PRESET_NAMES
+    for name in PRESETS:
+        assert sm.make_config(name).method in ("slime", name.removesuffix("-upright"))
 
 
 def test_dotted_slime_options_are_refused_for_a_base_alone():

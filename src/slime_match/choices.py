@@ -11,9 +11,13 @@ DEVICES = ("auto", "cpu", "cuda")
 # a method that runs that pipeline alone. Pipelines registered at run time are known to the Python API only.
 BUILTIN_BASES = ("hz+", "rootsift", "keynet")
 # the learned bases (kornia's ALIKED, DISK, XFeat with LightGlue or mutual nearest neighbours), registered after
-# them; they run alone only (``pipelines.learned``)
+# them; alone or inside Slime (``pipelines.learned``)
 LEARNED_BASES = ("aliked-lg", "aliked-nn", "disk-lg", "disk-nn", "xfeat-lg", "xfeat-nn")
 ALIKED_MODELS = ("n16", "n16rot", "n32")
+# the presets of ``make_config`` and ``slime match --method`` (``config.PRESETS`` holds their settings)
+PRESET_NAMES = ("slime", "slime-upright", "slime-rootsift", "slime-fast", "slime-fine", "slime-keynet",
+                "slime-keynet-upright", "slime-aliked", "hz+", "hz+-upright", "rootsift", "rootsift-upright",
+                "keynet", "keynet-upright", *LEARNED_BASES)
 
 SHAPE_METHODS = ("affnet", "baumberg")
 ORIENTATION_METHODS = ("orinet", "gradient", "upright", "fixed")
@@ -34,7 +38,7 @@ VIEW_MODES = ("off", "auto", "always")  # simulated views of image 0 (views.View
 # the flat options of one match (make_config's names) that the command line and the web app both offer, with
 # their choices (None: a value read by the option's type); the command line also takes method and weights_dir
 MATCH_OPTIONS = {
-    "base": BUILTIN_BASES, "descriptor": DESCRIPTOR_CHOICES, "shape": SHAPE_METHODS,
+    "base": (*BUILTIN_BASES, *LEARNED_BASES), "descriptor": DESCRIPTOR_CHOICES, "shape": SHAPE_METHODS,
     "orientation": ORIENTATION_CHOICES, "upright": None, "ransac": RANSAC_CHOICES, "threshold": None,
     "seed": None, "device": DEVICES, "min_side": None, "max_side": None, "scales": None, "detection": DETECTIONS,
     "tile_test": TILE_TESTS, "magnification": None, "views": VIEW_MODES, "workers": None,

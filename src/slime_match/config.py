@@ -162,6 +162,9 @@ PRESETS: dict[str, dict[str, Any]] = {
     "slime-fine": {"method": "slime", "base": "hz+", "scales": (1, 2, 3, 4)},
     "slime-keynet": {"method": "slime", "base": "keynet"},
     "slime-keynet-upright": {"method": "slime", "base": "keynet", "upright": True},
+    # Slime on ALIKED + LightGlue: every score maximum of ALIKED (at most 8000 per block scale), LightGlue on
+    # each pair of block scales' whole images (the learned base's default block matching); docs/choosing.md
+    "slime-aliked": {"method": "slime", "base": "aliked-lg", "aliked_threshold": 0.0},
     "hz+": {"method": "hz+"},
     "hz+-upright": {"method": "hz+", "upright": True},
     "rootsift": {"method": "rootsift"},

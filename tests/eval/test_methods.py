@@ -66,3 +66,5 @@ def test_sift_rootsift_and_mutual_options():
         methods.make_method("asift:ratio=0")
     assert methods.method_label("asift:num_features=2000,ratio=0.85") == "asift_num_features-2000_ratio-0.85"
     assert methods.method_title("asift") == "OpenCV ASIFT"
+    assert methods.method_title("slime") == "Slimed Hz+"
+    assert methods.method_title("slime:base=aliked-lg,views=off") == "Slimed ALIKED + LightGlue [views=off]"

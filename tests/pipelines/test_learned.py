@@ -17,6 +17,7 @@ import slime_match as sm
 from slime_match.choices import LEARNED_BASES
 from slime_match.config import make_config
 from slime_match.errors import ConfigError, WeightsNotFoundError
+from slime_match.pipelines import make_base_pipeline
 from slime_match.pipelines.learned import LEARNED_BASES as PIPELINE_PARTS
 from slime_match.pipelines.learned import unit_frames, xfeat_pixels
 
@@ -61,9 +62,19 @@ def test_bad_options_are_config_errors(name, options, message):
         make_config(name, **options)
 
 
-def test_slime_refuses_a_learned_base():
-    with pytest.raises(ConfigError, match="describe_fixed"):
-        make_config("slime", base="aliked-lg")
+@pytest.mark.parametrize("name", LEARNED_BASES)
+def test_slime_takes_a_learned_base(name):
+    config = make_config("slime", base=name)
+    assert config.method == "slime" and config.base.name == name
+
+
+def test_aliked_threshold_is_checked_and_read_by_aliked_only():
+    assert make_config("aliked-lg", aliked_threshold=0).base.aliked_threshold == 0
+    for bad in (-0.1, 1.0, True):
+        with pytest.raises(ConfigError, match="aliked_threshold"):
+            make_config("aliked-lg", aliked_threshold=bad)
+    with pytest.raises(ConfigError, match="does not use"):
+        make_config("disk-lg", aliked_threshold=0.1)
 
 
 def test_unit_frames_are_upright_unit_lafs_at_the_keypoints():
@@ -185,6 +196,43 @@ def test_aliked_models_are_selectable():
         assert result.summary["pipeline"]["aliked_model"] == model
         projected = cv2.perspectiveTransform(result.keypoints0[None], H)[0]
         assert len(result.scores) > 0 and np.isfinite(projected).all()
+
+
+def test_aliked_threshold_zero_keeps_the_strongest_maxima():
+    require_learned_weights(*NEEDS["aliked-nn"])
+    image = _rotated_pair()[0]
+    counts = {}
+    for threshold, cap in ((0.2, 4096), (0.0, 4096), (0.0, 300)):
+        config = make_config("aliked-nn", aliked_threshold=threshold, max_keypoints=cap)
+        counts[threshold, cap] = len(make_base_pipeline(config.base, "cpu").extract(image))
+    assert counts[0.0, 4096] > 2 * counts[0.2, 4096] and counts[0.0, 300] == 300
+
+
+@pytest.mark.parametrize("name", ["aliked-nn", "disk-nn", "xfeat-nn"])
+def test_learned_features_are_described_again_at_their_keypoints_and_under_a_turn(name):
+    """Slime's hooks on a learned base: its own frames are upright and are those of orientation 0; describing
+    its keypoints again gives its own descriptors; under a quarter turn, the descriptors of the image turned a
+    quarter the other way (np.rot90: the same pixels), at the same points."""
+    require_learned_weights(*NEEDS[name])
+    pipeline = make_base_pipeline(make_config(name).base, "cpu")
+    image = _rotated_pair()[0][:, 16:]  # 384 x 368: not square
+    context = pipeline.prepare(image)
+    features = pipeline.detect(context)
+    assert pipeline.own_frames_upright() and len(features) > 100
+    assert torch.equal(features.angle, torch.zeros(len(features)))
+    for turn in (0.0, 2 * np.pi, -2 * np.pi):
+        assert pipeline.describe_fixed(context, features, turn) is features
+    cosine = lambda a, b: (a * b).sum(-1)
+    again = pipeline.describe_at(image, features.xy)
+    assert cosine(again, features.descriptors).min() > 0.999
+    turned = pipeline.describe_fixed(context, features, np.pi / 2)
+    np.testing.assert_allclose(turned.angle.numpy(), np.pi / 2, atol=1e-6)
+    np.testing.assert_array_equal(turned.xy.numpy(), features.xy.numpy())
+    x, y = features.xy.unbind(1)
+    quarter = np.ascontiguousarray(np.rot90(image))  # (x, y) -> (y, W - 1 - x); +x there is +y here
+    upright = pipeline.describe_at(quarter, torch.stack([y, image.shape[1] - 1 - x], 1))
+    assert cosine(turned.descriptors, upright).min() > 0.999
+    assert cosine(turned.descriptors, features.descriptors).mean() < 0.9  # a turn changes them
 
 
 @pytest.mark.parametrize("name", ["aliked-lg", "aliked-nn", "xfeat-lg", "xfeat-nn"])

@@ -12,6 +12,8 @@ from slime_match.geometry.ransac import HomographyRansacConfig
 from slime_match.pipelines import BaseConfig, make_base_pipeline
 from slime_match.slime.block_planes import (
     BlockPairMatches,
+    _BlockSide,
+    _from_level_pairs,
     block_planes,
     block_planes_to_original,
     match_block_pairs,
@@ -146,3 +148,29 @@ def test_a_plane_counts_distinct_keypoints():
     matches = Matches(np.array([0, 0, 0, 0, 1]), np.array([0, 1, 2, 3, 4]), np.zeros(5))
     assert distinct_keypoints(matches) == 2
     assert distinct_keypoints(Matches.empty()) == 0
+
+
+def test_levels_matching_shares_each_level_pairs_matches_out_to_its_block_pairs(levels):
+    """``matching="levels"``: the base pipeline matches the two whole levels once, and each block pair gets,
+    in order, exactly those matches whose two ends lie in its blocks' cores, indexed into the blocks' own
+    features; planes come out of them as from per-pair matching."""
+    pipeline, blocks, _, _, _ = levels
+    image, moved = _moved_squares()
+    levels0, levels1 = build_levels(pipeline, image, blocks), build_levels(pipeline, moved, blocks)
+    (level0,), (level1,) = levels0, levels1
+    whole = pipeline.match(level0.features, level1.features, level0.size, level1.size)
+    fixed = FixedDescriptors(pipeline, 16)
+    side0, side1 = _BlockSide(levels0, blocks, fixed), _BlockSide(levels1, blocks, fixed)
+    pairs = [(w0, w1) for w0 in range(len(blocks)) for w1 in range(len(blocks))]
+    shared = _from_level_pairs(pipeline, side0, side1, pairs, workers=1)
+    assert sum(len(m) for m, _, _ in shared) > 0
+    for (w0, w1), (m, xy0, xy1) in zip(pairs, shared):
+        inside = np.isin(whole.idx0, level0.members[w0]) & np.isin(whole.idx1, level1.members[w1])
+        np.testing.assert_array_equal(m.scores, whole.scores[inside])
+        np.testing.assert_array_equal(xy0, level0.features.xy.numpy()[whole.idx0[inside]])
+        np.testing.assert_array_equal(xy1, level1.features.xy.numpy()[whole.idx1[inside]])
+        np.testing.assert_array_equal(side0.own(w0).xy.numpy()[m.idx0], xy0)
+        np.testing.assert_array_equal(side1.own(w1).xy.numpy()[m.idx1], xy1)
+    ransac = HomographyRansacConfig(threshold=15.0)
+    _, counts = match_block_pairs(pipeline, levels0, levels1, blocks, blocks, ransac, matching="levels")
+    assert counts["block_pairs"] == len(pairs) and counts["block_planes"] > 0

@@ -13,6 +13,7 @@ from ..choices import (
     LEARNED_BASES,
     MATCH_OPTIONS,
     ORIENTATION_CHOICES,
+    PRESET_NAMES,
     RANSAC_CHOICES,
     SHAPE_METHODS,
     TILE_TESTS,
@@ -27,10 +28,11 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
     everyday = parser.add_argument_group("matching")
     internals = parser.add_argument_group(
         "Slime and base pipeline internals", "the paper's parameters and their variants; any other by --set")
-    everyday.add_argument("--method", default=None, choices=("slime", *BUILTIN_BASES, *LEARNED_BASES),
-                          help="Slime (default) or a base pipeline alone (the learned ones: ALIKED, DISK or XFeat "
-                               "with LightGlue (-lg) or mutual nearest neighbours (-nn))")
-    internals.add_argument("--base", default=None, choices=BUILTIN_BASES,
+    everyday.add_argument("--method", default=None, choices=PRESET_NAMES,
+                          help="a preset: Slime (default) and its variants, or a base pipeline alone (the learned "
+                               "ones: ALIKED, DISK or XFeat with LightGlue (-lg) or mutual nearest neighbours "
+                               "(-nn)); the README's table says what each is")
+    internals.add_argument("--base", default=None, choices=(*BUILTIN_BASES, *LEARNED_BASES),
                            help="base pipeline run inside Slime (default hz+)")
     everyday.add_argument("--descriptor", default=None, choices=DESCRIPTOR_CHOICES,
                           help="Hz+ / Key.Net descriptor; auto = the best whose weights are available: HardNet, "

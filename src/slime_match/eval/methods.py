@@ -177,6 +177,7 @@ REGISTRY: dict[str, tuple[str, Callable[..., MethodFn]]] = {
     "keynet-upright": ("Key.Net (upright)", _preset("keynet-upright")),
     "slime-keynet": ("Slimed Key.Net", _preset("slime-keynet")),
     "slime-keynet-upright": ("Slimed Key.Net (upright)", _preset("slime-keynet-upright")),
+    "slime-aliked": ("Slimed ALIKED + LightGlue", _preset("slime-aliked")),
     "opencv-sift": ("OpenCV SIFT", lambda **o: OpenCVSift(**o)),
     "asift": ("OpenCV ASIFT", lambda **o: OpenCVAsift(**o)),
     "loftr": ("LoFTR", lambda **o: KorniaLoFTR(**o)),
@@ -227,9 +228,13 @@ def method_label(spec: str) -> str:
 
 
 def method_title(spec: str) -> str:
-    """Human-readable name of a spec: the paper's label plus any options."""
+    """Human-readable name of a spec: the paper's label plus any options ("Slimed <base>" for Slime with a
+    ``base`` option)."""
     name, options = parse_method_spec(spec)
     title = REGISTRY[name][0]
+    if name == "slime" and options.get("base") in REGISTRY:
+        options = dict(options)
+        title = f"Slimed {REGISTRY[options.pop('base')][0]}"
     return title + (f" [{', '.join(f'{k}={v}' for k, v in options.items())}]" if options else "")
 
 

@@ -122,15 +122,16 @@ def load_learned(model: str, build: Callable[[], nn.Module], device: torch.devic
     return network.eval().to(device)
 
 
-def aliked(model: str, max_keypoints: int, device: torch.device | str = "cpu") -> nn.Module:
-    """kornia's ALIKED ``aliked-<model>`` (``model`` in :data:`ALIKED_MODELS`): the score maxima above kornia's
-    detection threshold (0.2), at most the ``max_keypoints`` strongest."""
+def aliked(model: str, max_keypoints: int, threshold: float = 0.2, device: torch.device | str = "cpu") -> nn.Module:
+    """kornia's ALIKED ``aliked-<model>`` (``model`` in :data:`ALIKED_MODELS`): the score maxima above
+    ``threshold`` (kornia's default 0.2), at most the ``max_keypoints`` strongest (``threshold`` 0: the
+    ``max_keypoints`` strongest maxima)."""
     import kornia.feature as KF
 
     if model not in ALIKED_MODELS:
         raise ConfigError(f"aliked_model must be one of {', '.join(ALIKED_MODELS)}, got {model!r}")
     return load_learned(f"aliked-{model}", lambda: KF.ALIKED.from_pretrained(
-        f"aliked-{model}", max_num_keypoints=max_keypoints), device)
+        f"aliked-{model}", max_num_keypoints=max_keypoints, detection_threshold=threshold), device)
 
 
 def disk(device: torch.device | str = "cpu") -> nn.Module:

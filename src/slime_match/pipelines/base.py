@@ -69,6 +69,8 @@ class BaseConfig:
         fginn_ratio, fginn_radius: FGINN ratio and spatial radius (px) for the RootSIFT pipeline.
         aliked_model: the ALIKED weights of the aliked-* pipelines: "n16" | "n16rot" (trained for rotations) |
             "n32".
+        aliked_threshold: ALIKED's detection threshold on its score map: the score maxima above it, at most
+            ``max_keypoints`` (0: the ``max_keypoints`` strongest maxima, however weak).
         nn_ratio: Lowe's ratio of the mutual nearest-neighbour matcher of the *-nn learned pipelines (1: mutual
             nearest neighbours alone).
         use_dtm: run DTM after Blob matching (Hz+); False only for inspection.
@@ -85,6 +87,7 @@ class BaseConfig:
     fginn_ratio: float = 0.8
     fginn_radius: float = 10.0
     aliked_model: str = "n16"
+    aliked_threshold: float = 0.2
     nn_ratio: float = 0.9
     use_dtm: bool = True
     blob: BlobConfig = field(default_factory=BlobConfig)
@@ -101,6 +104,9 @@ class BaseConfig:
         check_choice("orientation", self.orientation, ORIENTATION_CHOICES)
         check_integer("max_keypoints", self.max_keypoints, 1)
         check_choice("aliked_model", self.aliked_model, ALIKED_MODELS)
+        if not (isinstance(self.aliked_threshold, numbers.Real) and not isinstance(self.aliked_threshold, bool)
+                and 0 <= self.aliked_threshold < 1):
+            raise ConfigError(f"aliked_threshold must be in [0, 1), got {self.aliked_threshold!r}")
         if not (isinstance(self.nn_ratio, numbers.Real) and not isinstance(self.nn_ratio, bool)
                 and 0 < self.nn_ratio <= 1):
             raise ConfigError(f"nn_ratio must be in (0, 1], got {self.nn_ratio!r}")
@@ -117,12 +123,16 @@ class BasePipeline:
             the base Key.Net alone"). The DTM reads ``config.dtm``.
         slime_detection: Slime's default block detection on this base (``SlimeConfig.detection``): "merged"
             where the detector runs apart from the patch stages (Hz+), else "scale".
+        slime_block_matching: how Slime finds a block pair's first matches on this base by default
+            (``SlimeConfig.block_matching``): "pairs" (each block pair, the paper's) or "levels" (each pair of
+            block scales' whole images, for a matcher that reads the whole image).
         options: the :class:`BaseConfig` fields this pipeline reads (``make_config`` refuses the others).
     """
 
     name: str = "base"
     slime_global_dtm: bool = True
     slime_detection: str = "scale"
+    slime_block_matching: str = "pairs"
     options: frozenset[str] = frozenset()
 
     def __init__(self, config: BaseConfig, device: torch.device) -> None:

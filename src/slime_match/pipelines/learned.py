@@ -5,14 +5,22 @@ Each pair of extractor and matcher is a base pipeline of its own, registered as 
 ``<extractor>-nn`` (:data:`LEARNED_BASES`). The networks and their weights are kornia's
 (:mod:`slime_match.features.learned_weights`); the images they see are the matcher's working images (the
 presets shrink them to 1024 px on the longer side), and the keypoints come back in the pixels of those images
-(the centre of the top-left pixel is (0, 0)). These pipelines run alone; Slime needs ``describe_fixed``, which
-they do not have.
+(the centre of the top-left pixel is (0, 0)).
+
+Slime runs on them as on any base (``slime --base aliked-lg``): the blocks' and tiles' features come from the
+extractor on each block scale's image, and the block and tile pairs are matched by the pipeline's matcher. The
+extractors give no orientation, so their frames are upright: every relative orientation Slime reads between
+two upright images is 0, and the orientation re-run of Sec. 3.3 reuses the first run's matches. A plane
+found through a simulated view carries the view's turn; its tiles are then described under that orientation
+by describing the keypoints on the image turned the other way (``describe_fixed``).
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
+import cv2
 import numpy as np
 import torch
 
@@ -54,7 +62,7 @@ class LearnedPipeline(BasePipeline):
     """A learned extractor (``extractor``: "aliked", "disk" or "xfeat") and a matcher (``matcher``: "lightglue"
     or "mutual-nn"), both kornia's networks on the working images.
 
-    Extractors: ALIKED (``aliked_model`` n16, n16rot or n32; the score maxima above kornia's threshold 0.2, at
+    Extractors: ALIKED (``aliked_model`` n16, n16rot or n32; the score maxima above ``aliked_threshold``, at
     most ``max_keypoints``), DISK ("depth" weights, at most ``max_keypoints``), XFeat (its ``max_keypoints``
     strongest detections; XFeat resizes the image to multiples of 32 inside, which the keypoints are mapped back
     from exactly). Matchers: LightGlue with the extractor's weights (LighterGlue for XFeat), whose scores are
@@ -71,7 +79,8 @@ class LearnedPipeline(BasePipeline):
     def __init__(self, config: BaseConfig, device: torch.device) -> None:
         self.config, self.device = config, device
         if self.extractor == "aliked":
-            self.network = learned_weights.aliked(config.aliked_model, config.max_keypoints, device)
+            self.network = learned_weights.aliked(config.aliked_model, config.max_keypoints, config.aliked_threshold,
+                                                  device)
         elif self.extractor == "disk":
             self.network = learned_weights.disk(device)
         else:
@@ -117,6 +126,49 @@ class LearnedPipeline(BasePipeline):
             matches = Matches(idx[order, 0], idx[order, 1], scores[order])
         return _filtered(matches, features0, features1, candidate_filter)
 
+    @torch.inference_mode()
+    def describe_fixed(self, context: np.ndarray, features: Features, angle: float) -> Features:
+        """``features`` of the (H, W, 3) image ``context`` under orientation ``angle`` (radians): their own at a
+        multiple of a full turn; otherwise described on the image turned by ``-angle`` (bilinear, on a canvas
+        that holds all of it), where a patch whose x axis points along ``angle`` stands upright."""
+        if abs(math.remainder(angle, 2 * math.pi)) < 1e-9 or len(features) == 0:
+            return features
+        turned, to_turned = turned_image(context, angle)
+        xy = features.xy.detach().cpu().double().numpy() @ to_turned[:, :2].T + to_turned[:, 2]
+        descriptors = self.describe_at(turned, torch.from_numpy(xy).float().to(self.device))
+        laf = unit_frames(features.xy)
+        cos, sin = math.cos(angle), math.sin(angle)
+        laf[:, :, :2] = torch.tensor([[cos, -sin], [sin, cos]], dtype=laf.dtype, device=laf.device)
+        return Features(laf, descriptors, features.response, laf)
+
+    @torch.inference_mode()
+    def describe_at(self, image: np.ndarray, xy: torch.Tensor) -> torch.Tensor:
+        """(N, D) L2-normalised descriptors of the extractor at the (N, 2) pixel positions ``xy`` of an
+        (H, W, 3) image: ALIKED's descriptor head on its dense map, DISK's dense descriptors and XFeat's
+        (at 1/8 of its multiple-of-32 resize) sampled bilinearly there."""
+        rgb = torch.from_numpy(np.clip(np.ascontiguousarray(image, dtype=np.float32), 0.0, 1.0))
+        rgb = rgb.permute(2, 0, 1)[None].to(self.device)
+        height, width = image.shape[:2]
+        if self.extractor == "aliked":
+            dense, _ = self.network.extract_dense_map(rgb)
+            span = torch.tensor([width - 1, height - 1], dtype=torch.float32, device=self.device)
+            descriptors, _ = self.network.desc_head(dense, [xy / span * 2 - 1])
+            return descriptors[0].float()
+        if self.extractor == "disk":
+            pad = (0, -width % 16, 0, -height % 16)
+            _, dense = self.network.heatmap_and_dense_descriptors(torch.nn.functional.pad(rgb, pad))
+            return _sampled(dense[..., :height, :width], xy)
+        inner, ratio_h, ratio_w = self.network._preprocess_tensor(rgb)
+        dense = torch.nn.functional.normalize(self.network.net(inner)[0], dim=1)
+        # image px -> the resized image's px (pixel edges aligned), then -> the 1/8 map's sampling grid
+        ratio = torch.tensor([ratio_w, ratio_h], dtype=torch.float32, device=self.device)
+        inner_xy = (xy + 0.5) / ratio - 0.5
+        samples = self.network.interpolator(dense, inner_xy[None], H=inner.shape[-2], W=inner.shape[-1])[0]
+        return torch.nn.functional.normalize(samples, dim=-1)
+
+    def own_frames_upright(self) -> bool:
+        return True  # unit upright frames, described by the network as they are
+
     def kernel_groups(self) -> tuple[str, ...]:
         # mutual NN runs the nearest-neighbour loops of Blob matching on the CPU
         return ("blob",) if self.matcher == "mutual-nn" and self.device.type == "cpu" else ()
@@ -125,7 +177,7 @@ class LearnedPipeline(BasePipeline):
         summary: dict[str, Any] = {"base": self.name, "detector": self.extractor, "descriptor": self.extractor,
                                    "max_keypoints": self.config.max_keypoints}
         if self.extractor == "aliked":
-            summary["aliked_model"] = self.config.aliked_model
+            summary.update(aliked_model=self.config.aliked_model, aliked_threshold=self.config.aliked_threshold)
         if self.glue is None:
             summary.update(matcher="mutual-nn", nn_ratio=self.config.nn_ratio)
         else:
@@ -133,12 +185,39 @@ class LearnedPipeline(BasePipeline):
         return summary
 
 
+def turned_image(image: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
+    """An (H, W, 3) image turned by ``-angle`` radians about its centre, on the smallest canvas that holds it
+    (zero outside), and the (2, 3) affine map from image pixels to the canvas' pixels: a direction at ``angle``
+    in the image points along +x on the canvas."""
+    height, width = image.shape[:2]
+    cos, sin = math.cos(angle), math.sin(angle)
+    linear = np.array([[cos, sin], [-sin, cos]])  # R(-angle)
+    corners = np.array([[0, 0], [width - 1, 0], [0, height - 1], [width - 1, height - 1]], np.float64) @ linear.T
+    low, high = corners.min(0), corners.max(0)
+    to_turned = np.c_[linear, -low]
+    size = tuple(math.ceil(v - 1e-9) + 1 for v in high - low)  # a quarter turn: exactly (H, W) swapped
+    turned = cv2.warpAffine(np.ascontiguousarray(image, np.float32), to_turned, size, flags=cv2.INTER_LINEAR,
+                            borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    return turned, to_turned
+
+
+def _sampled(dense: torch.Tensor, xy: torch.Tensor) -> torch.Tensor:
+    """(N, D) L2-normalised bilinear samples of a (1, D, H, W) dense map at (N, 2) pixel positions."""
+    height, width = dense.shape[-2:]
+    span = torch.tensor([max(width - 1, 1), max(height - 1, 1)], dtype=torch.float32, device=dense.device)
+    grid = (xy / span * 2 - 1)[None, None]
+    samples = torch.nn.functional.grid_sample(dense, grid, mode="bilinear", align_corners=True)[0, :, 0].T
+    return torch.nn.functional.normalize(samples, dim=-1)
+
+
 def learned_pipeline_class(name: str) -> type[LearnedPipeline]:
     """The pipeline class registered as ``name`` (a key of :data:`LEARNED_BASES`)."""
     extractor, matcher = LEARNED_BASES[name]
-    options = {"max_keypoints"} | ({"aliked_model"} if extractor == "aliked" else set()) \
+    options = {"max_keypoints"} | ({"aliked_model", "aliked_threshold"} if extractor == "aliked" else set()) \
         | ({"nn_ratio"} if matcher == "mutual-nn" else set())
     return type(f"{extractor.upper()}{'LightGlue' if matcher == 'lightglue' else 'MutualNN'}Pipeline",
                 (LearnedPipeline,), {"name": name, "extractor": extractor, "matcher": matcher,
                                      "options": frozenset(options), "__module__": __name__,
+                                     # LightGlue reads the whole image: Slime gives it whole block levels
+                                     "slime_block_matching": "levels" if matcher == "lightglue" else "pairs",
                                      "__doc__": f"{extractor} + {matcher} (see :class:`LearnedPipeline`)."})

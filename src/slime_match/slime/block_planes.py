@@ -2,6 +2,11 @@
 re-matched under the plane's fixed orientations (theta = 0 in image 0, theta* in image 1) and RANSAC again:
 the planes M_l, H_l, mapped to original-image pixels for the later stages.
 
+A block pair's first matches come from the base pipeline on the two blocks' features (``matching="pairs"``, the
+paper's), or from the base pipeline on the two blocks' whole levels, each pair of levels matched once and shared
+out to its block pairs by their cores (``matching="levels"``: a matcher that reads the whole image, such as
+LightGlue, keeps that context; one match per pair of block scales instead of one per block pair).
+
 The pairs and RANSACs run in the job runner's workers (:mod:`.jobs`): RANSACs of all block pairs as batches,
 the fixed-orientation descriptors once per (level, bin) for the blocks that a re-run needs
 (:class:`.fixed_descriptors.FixedDescriptors`).
@@ -15,6 +20,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
+from .._runtime.forking import fork_map
 from ..geometry.frames import stack_matrices
 from ..geometry.homography import project
 from ..geometry.ransac import HomographyRansacConfig
@@ -22,12 +28,14 @@ from ..pipelines import BasePipeline
 from ..types import Features, Matches
 from .blocks import Block
 from .fixed_descriptors import FixedDescriptors
-from .jobs import MatchJob, match_jobs, pair_workers, ransac_batches
+from .jobs import JobMatches, MatchJob, device_workers, match_jobs, pair_workers, ransac_batches
 from .levels import ScaleLevel
 from .match_table import MatchTable, deduplicate
 from .orientations import orientation_bin, relative_orientation
 
-__all__ = ["BlockPairMatches", "BlockPlanes", "block_planes", "block_planes_to_original", "distinct_keypoints",
+BLOCK_MATCHINGS = ("pairs", "levels")  # how a block pair's first matches are found (module docstring)
+
+__all__ = ["BLOCK_MATCHINGS", "BlockPairMatches", "BlockPlanes", "block_planes", "block_planes_to_original", "distinct_keypoints",
            "match_block_pairs"]
 
 
@@ -105,9 +113,13 @@ def match_block_pairs(
     seed: int = 0,
     workers: int = 1,
     fixed: FixedDescriptors | None = None,
+    matching: str = "pairs",
 ) -> tuple[BlockPairMatches, dict[str, int]]:
     """Secs. 3.2 + 3.3 for every block pair: base pipeline + homography RANSAC, then the re-run with
     fixed orientations (theta = 0 in image 0, theta* in image 1) + RANSAC -> M_l and H_l.
+
+    The first run matches each block pair (``matching="pairs"``) or each pair of levels (``"levels"``, see the
+    module docstring); the re-run matches each block pair.
 
     A plane needs ``min_matches`` RANSAC inliers with as many distinct keypoints in each image (the base
     pipeline may match one keypoint several times). ``fixed`` holds the fixed-orientation descriptors of
@@ -128,7 +140,10 @@ def match_block_pairs(
         return side0.own(w0), side1.own(w1), blocks0[w0], blocks1[w1], None
 
     # 3.2: the base pipeline with its own orientations, then RANSAC.
-    first = match_jobs(pipeline, len(pairs), own_job, pair_workers(len(pairs), workers))
+    if matching == "levels":
+        first = _from_level_pairs(pipeline, side0, side1, pairs, workers)
+    else:
+        first = match_jobs(pipeline, len(pairs), own_job, pair_workers(len(pairs), workers))
     results = ransac_batches([(xy0, xy1) for _, xy0, xy1 in first], ransac, seed, workers)
     thetas = {}
     for pair, (m, _, _), res in zip(pairs, first, results):
@@ -177,6 +192,40 @@ def match_block_pairs(
     counts = {"block_pairs": len(pairs), "block_planes_first": len(thetas), "block_pairs_rerun": len(redo),
               "block_planes": len(keep_pairs)}
     return _collect(keep_pairs, hs, theta_out, parts), counts
+
+
+def _from_level_pairs(pipeline: BasePipeline, side0: _BlockSide, side1: _BlockSide, pairs: list[tuple[int, int]],
+                      workers: int) -> list[JobMatches]:
+    """Per block pair, the matches between its two cores taken from the base pipeline on the blocks' whole
+    levels (each pair of levels matched once, in ``workers`` processes; one on CUDA)."""
+    level_of = [{w: side.wanted(w)[0] for w in range(len(side.blocks))} for side in (side0, side1)]
+    level_pairs = sorted({(id(level_of[0][w0]), id(level_of[1][w1])) for w0, w1 in pairs})
+    levels = {id(level): level for side in level_of for level in side.values()}
+
+    def match(k: int) -> Matches:
+        level0, level1 = (levels[key] for key in level_pairs[k])
+        return pipeline.match(level0.features, level1.features, level0.size, level1.size)
+
+    found = dict(zip(level_pairs, fork_map(match, len(level_pairs), device_workers(pipeline, workers))))
+    local = [{}, {}]  # per side and block: level index -> index among the block's own features (-1: outside)
+
+    def local_index(side: int, w: int) -> np.ndarray:
+        if w not in local[side]:
+            level, members = (side0, side1)[side].wanted(w)
+            index = np.full(len(level.features), -1, np.int64)
+            index[members] = np.arange(len(members))
+            local[side][w] = index
+        return local[side][w]
+
+    out = []
+    for w0, w1 in pairs:
+        m = found[id(level_of[0][w0]), id(level_of[1][w1])]
+        i0, i1 = local_index(0, w0)[m.idx0], local_index(1, w1)[m.idx1]
+        m = Matches(i0, i1, m.scores).subset((i0 >= 0) & (i1 >= 0))
+        xy0, xy1 = (side.own(w).xy.detach().cpu().numpy().astype(np.float64)[idx]
+                    for side, w, idx in ((side0, w0, m.idx0), (side1, w1, m.idx1)))
+        out.append((m, xy0, xy1))
+    return out
 
 
 def distinct_keypoints(matches: Matches) -> int:
@@ -274,11 +323,13 @@ class BlockPlanes:
 
 def block_planes(pipeline: BasePipeline, levels0: list[ScaleLevel], levels1: list[ScaleLevel], blocks0: list[Block],
                  blocks1: list[Block], ransac: HomographyRansacConfig, bins: int = 16, min_matches: int = 8,
-                 seed: int = 0, workers: int = 1, fixed: FixedDescriptors | None = None) -> BlockPlanes:
+                 seed: int = 0, workers: int = 1, fixed: FixedDescriptors | None = None, matching: str = "pairs"
+                 ) -> BlockPlanes:
     """Secs. 3.2-3.3 (``match_block_pairs``, same arguments), the planes mapped to original pixels and their
     matches gathered in one deduplicated match table."""
     matches, counts = match_block_pairs(pipeline, levels0, levels1, blocks0, blocks1, ransac, bins=bins,
-                                        min_matches=min_matches, seed=seed, workers=workers, fixed=fixed)
+                                        min_matches=min_matches, seed=seed, workers=workers, fixed=fixed,
+                                        matching=matching)
     raw, h, side = block_planes_to_original(matches, blocks0, blocks1)
     table, _ = deduplicate(raw)
     counts.update(block_matches=len(raw), block_matches_unique=len(table))

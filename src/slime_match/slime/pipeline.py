@@ -29,7 +29,7 @@ from ..geometry.frames import Frame, homographies_to_original
 from ..geometry.ransac import HomographyRansacConfig
 from ..pipelines import BasePipeline
 from ..views import ViewConfig, ViewRecord
-from .block_planes import BlockPlanes, block_planes
+from .block_planes import BLOCK_MATCHINGS, BlockPlanes, block_planes
 from .blocks import Block, BlockConfig, make_blocks, make_tiles
 from .diagnostics import empty_result_reason, layout_warning, tile_count_warning
 from .dtm_frame import DTM_MAX_TILT
@@ -78,6 +78,11 @@ class SlimeConfig:
             block crop on its own but describes the keypoints shared by overlapping blocks once; None: the
             base pipeline's ``slime_detection`` ("merged" for Hz+, "scale" for RootSIFT and Key.Net).
         tile_detection: the same choice for the full-resolution tiles of Sec. 3.8 ("scale" by default).
+        block_matching: how a block pair's first matches are found (``block_planes.BLOCK_MATCHINGS``): "pairs",
+            the base pipeline on each block pair (the paper's); "levels", the base pipeline once on each pair of
+            block scales' whole images, each block pair taking the matches between its cores (a matcher that
+            reads the whole image, LightGlue, keeps its context); None: the base pipeline's
+            ``slime_block_matching`` ("pairs" for the handcrafted bases).
         tile_test: which tile candidates Sec. 3.8 keeps (``refine.TILE_TESTS``): "plane" (within t_perp of
             the plane homography of one of the tile pair's F^theta sets, on its side: the whole tile pair
             where the plane holds, not only near the block matches; ours, the default: more coverage on
@@ -98,6 +103,7 @@ class SlimeConfig:
     keep_stages: bool = False
     detection: str | None = None
     tile_detection: str = "scale"
+    block_matching: str | None = None
     tile_test: str = "plane"
 
     def __post_init__(self) -> None:
@@ -113,6 +119,8 @@ class SlimeConfig:
         if self.detection is not None:
             check_choice("detection", self.detection, DETECTIONS)
         check_choice("tile_detection", self.tile_detection, DETECTIONS)
+        if self.block_matching is not None:
+            check_choice("block_matching", self.block_matching, BLOCK_MATCHINGS)
         check_choice("tile_test", self.tile_test, TILE_TESTS)
         return self
 
@@ -198,10 +206,11 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
                          for image, tiles in ((image0, layout.tiles0), (image1, layout.tiles1))]
         features = feature_levels(pipeline, requests, workers, level_cache)
     fixed = FixedDescriptors(pipeline, config.bins, workers)  # image 1's serve the plain blocks and the views
+    matching = config.block_matching or pipeline.slime_block_matching
     with timer("block_pairs"), torch_threads(1):
         planes = block_planes(pipeline, *features.levels[:2], layout.blocks0, layout.blocks1, config.ransac,
                               bins=config.bins, min_matches=config.min_plane_matches, seed=seed, workers=workers,
-                              fixed=fixed)
+                              fixed=fixed, matching=matching)
     expansion, selection = _select(planes, layout, config, workers, timer)
     record = ViewRecord(views.mode)
     blocks0 = list(layout.blocks0)  # and the views' blocks, when views are added
@@ -216,7 +225,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
             with timer("views"), torch_threads(1):
                 found = view_planes(pipeline, image0, tilt, features.levels[1], layout.blocks1, config.blocks,
                                     config.ransac, detection, config.bins, config.min_plane_matches, seed, workers,
-                                    level_cache, fixed)
+                                    level_cache, fixed, matching)
             sources.append((tilt, found.views, len(planes.H), len(planes.H) + len(found.planes.H)))
             planes = planes.joined(found.planes, len(blocks0))
             blocks0 += found.blocks

@@ -44,13 +44,13 @@ class ViewPlanes:
 def view_planes(pipeline: BasePipeline, image0: np.ndarray, tilt: float, levels1: list[ScaleLevel],
                 blocks1: list[Block], blocks: BlockConfig, ransac: HomographyRansacConfig, detection: str,
                 bins: int, min_matches: int, seed: int, workers: int, cache: LevelCache | None,
-                fixed: FixedDescriptors | None = None) -> ViewPlanes:
+                fixed: FixedDescriptors | None = None, matching: str = "pairs") -> ViewPlanes:
     """Secs. 3.1-3.3 for the views of image 0 at ``tilt`` (ASIFT's rotations) against image 1's blocks.
 
     Args:
         image0: (H, W, 3) float image 0 (the working image).
         levels1, blocks1: image 1's block levels and blocks (the plain run's).
-        blocks, ransac, detection, bins, min_matches, seed, workers: as for the plain block stage.
+        blocks, ransac, detection, bins, min_matches, seed, workers, matching: as for the plain block stage.
         cache: the features cache (a view's features depend on the image and the view only).
         fixed: the plain block stage's fixed-orientation descriptors (image 1's are reused, not described again).
     """
@@ -67,5 +67,5 @@ def view_planes(pipeline: BasePipeline, image0: np.ndarray, tilt: float, levels1
         levels0 += [replace(level, blocks=[offset + i for i in level.blocks]) for level in levels]
         all_blocks += request.blocks
     planes = block_planes(pipeline, levels0, levels1, all_blocks, blocks1, ransac, bins=bins,
-                          min_matches=min_matches, seed=seed, workers=workers, fixed=fixed)
+                          min_matches=min_matches, seed=seed, workers=workers, fixed=fixed, matching=matching)
     return ViewPlanes(planes, all_blocks, len(requests), features.reused)
