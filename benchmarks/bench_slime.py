@@ -2,7 +2,7 @@
 pair, and the block detection ablation (merged vs scale vs block, tiles); OpenCV SIFT as a same-process reference.
 
     python benchmarks/bench_slime.py [--out results/bench_slime.json] [--descriptor tfeat] [--skip-ablation]
-                                     [--skip-fast] [--skip-fine] [--skip-large]
+                                     [--skip-fast] [--skip-fine] [--skip-large] [--learned]
     python benchmarks/bench_slime.py --device cuda --descriptor hardnet      # the GPU run
 
 Pairs: graf img1 -> img3 resized (cv2.INTER_AREA) to 640x480 and 1200x900; the GT homography is scaled with
@@ -19,6 +19,9 @@ untimed ``slime-fast`` call first compiles Slime's kernels, which a fresh machin
   detected on its own, keypoints shared by overlapping blocks described once) vs "scale" (one detection per
   block scale) vs "block" (each block crop detected and described on its own, the paper's prototype), and
   vs tiles detected per crop (``tile_detection="block"``) -- same pair, same everything else;
+* with ``--learned`` (ALIKED and LightGlue weights in ``TORCH_HOME``: ``scripts/fetch_learned_weights.py``):
+  ALIKED + LightGlue alone (``aliked-lg``), then Slime on it (``slime-aliked``), at 640x480, and the time of
+  ``slime-aliked`` over the default Slime run of the same pair;
 * OpenCV SIFT (8000 features) detect+describe of the same images.
 
 Quality: matches correct when the two-sided GT reprojection error is below t (paper t = 15 px, and 3 px),
@@ -240,6 +243,19 @@ def bench_ablation(label: str, options: dict, pair, device: str, default_record:
     return out
 
 
+def bench_learned_base(pair, device: str, default_record: dict) -> dict:
+    """ALIKED + LightGlue alone (which loads the networks) then Slime on it, next to the default Slime run of the
+    same pair."""
+    base = run_matcher(Matcher(make_config("aliked-lg", device=device)), pair)
+    slime = run_matcher(Matcher(make_config("slime-aliked", device=device)), pair)
+    out = {"preset": "slime-aliked", "slime": slime, "base": base,
+           "slime_over_base_time": round(slime["wall_s"] / max(base["wall_s"], 1e-9), 2),
+           "over_default_slime_time": round(slime["wall_s"] / max(default_record["wall_s"], 1e-9), 2)}
+    _print_comparison("Slime on ALIKED + LightGlue (slime-aliked) 640x480, base aliked-lg", out)
+    print(f"slime-aliked / default Slime time: {out['over_default_slime_time']:.2f}x")
+    return out
+
+
 def bench_opencv_sift(pairs: dict[str, tuple]) -> dict:
     sift = cv2.SIFT_create(nfeatures=8000)
     out = {}
@@ -270,9 +286,9 @@ def _print_comparison(name: str, out: dict) -> None:
     print(f"   peak RSS {slime['peak_rss_mb']} MB (workers {slime.get('workers_maxrss_mb')} MB); "
           f"{_quality_line(slime)}")
     print("   counts: " + ", ".join(f"{k} {v}" for k, v in slime["counts"].items()))
-    print(f"Hz+    {base['wall_s']:8.2f} s   stages: " + ", ".join(f"{k} {v:.2f}" for k, v in base["seconds"].items()))
+    print(f"base   {base['wall_s']:8.2f} s   stages: " + ", ".join(f"{k} {v:.2f}" for k, v in base["seconds"].items()))
     print(f"   peak RSS {base['peak_rss_mb']} MB; {_quality_line(base)}")
-    print(f"Slime / Hz+ time: {out['slime_over_base_time']:.1f}x")
+    print(f"Slime / base time: {out['slime_over_base_time']:.1f}x")
 
 
 def _print_ablation(label: str, out: dict) -> None:
@@ -298,6 +314,9 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--skip-fine", action="store_true", help="skip the slime-fine (block scales 1-4) runs")
     parser.add_argument("--skip-ablation", action="store_true",
                         help="skip the block and tile detection ablation (minutes on a CPU)")
+    parser.add_argument("--learned", action="store_true",
+                        help="also ALIKED + LightGlue alone and Slime on it (slime-aliked) at 640x480 (their weights "
+                             "in TORCH_HOME)")
     args = parser.parse_args(argv)
     if args.device == "cuda" and not torch.cuda.is_available():
         raise SystemExit("--device cuda: no CUDA device available")
@@ -355,6 +374,9 @@ def main(argv: list[str] | None = None) -> dict:
                                         ("weight-free", WEIGHT_FREE, weight_free)):
             runs[f"ablation block detection merged vs scale vs block, tiles, {label} 640x480"] = bench_ablation(
                 label, options, pairs["640x480"], args.device, default["slime"])
+    if args.learned:
+        runs["slime-aliked 640x480"] = bench_learned_base(pairs["640x480"], args.device,
+                                                          runs[f"{learned} 640x480"]["slime"])
     print()
     runs["opencv_sift"] = bench_opencv_sift(pairs)
     report["meta"]["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
