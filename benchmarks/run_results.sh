@@ -6,13 +6,14 @@
 #
 #   benchmarks/run_results.sh [extra slime-bench options, e.g. --device cuda]
 #
-# Slow on a CPU (about 1.5 hours on 2 cores: Slime and Slimed Key.Net take 10-50 s per pair); resumable:
+# Slow on a CPU (several hours on 2 cores: 76 planar and non-planar pairs and 15 hard pairs, the Slime
+# presets 10-50 s a pair and up to 110 s where simulated views are tried; run it on a quiet machine); resumable:
 # predictions are cached in $OUT/predictions and $OUT_HARD/predictions, so an interrupted run continues where
 # it stopped and a rerun only recomputes metrics. Every method runs at its default settings (the descriptor
 # `auto` takes the best network whose weights are present and the report names it); the main table gives
 # each method at its best post-processing RANSAC threshold, stated in its column.
 # Environment: OUT (results folder, default results/full), OUT_HARD (default results/hard), METHODS and
-# HARD_METHODS (';'-separated method specs; the learned bases, e.g. aliked-lg, need their weights in
+# HARD_METHODS (';'-separated method specs; the learned bases, aliked-lg and slime-aliked by default, need their weights in
 # TORCH_HOME: scripts/fetch_learned_weights.py), DATA (data folder, default $SLIME_MATCH_DATA or ../shared/data),
 # TORCH_HOME (network weights).
 set -euo pipefail
@@ -23,8 +24,8 @@ fi
 DATA="${DATA:-${SLIME_MATCH_DATA:-../shared/data}}"
 OUT="${OUT:-results/full}"
 OUT_HARD="${OUT_HARD:-results/hard}"
-METHODS="${METHODS:-slime;slime-upright;hz+;slime-keynet;keynet;slime-rootsift;rootsift;opencv-sift;aliked-lg}"
-HARD_METHODS="${HARD_METHODS:-slime;slime:views=off;hz+;asift;opencv-sift:rootsift=true,mutual=true;aliked-lg}"
+METHODS="${METHODS:-slime;slime-upright;hz+;slime-keynet;keynet;slime-rootsift;rootsift;opencv-sift;aliked-lg;slime-aliked}"
+HARD_METHODS="${HARD_METHODS:-slime;slime:views=off;hz+;asift;opencv-sift:rootsift=true,mutual=true;aliked-lg;slime-aliked}"
 python -m slime_match.eval.bench graf hpatches scannet-sample motorcycle --data-root "$DATA" \
     --rotations 90,180,270 --thresholds none,5,3,2,1 --seed 0 --methods "$METHODS" -o "$OUT" "$@"
 python -m slime_match.eval.bench "evd:$DATA/hard/evd" "wxbs:$DATA/hard/wxbs" --thresholds none --map-pairs 0 \

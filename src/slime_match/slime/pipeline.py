@@ -128,8 +128,9 @@ class SlimeConfig:
 @dataclass
 class SlimeOutput:
     """Final matches (original px), counts per stage, warnings (why a result is empty, slow layouts), the
-    rules that decided adaptive stages and why (e.g. ``{"vote": "consensus", "vote_reason": ...}``), and
-    optionally every stage's arrays."""
+    rules that decided adaptive stages and why (e.g. ``{"vote": "consensus", "vote_reason": ...}``) with the
+    block detection and block matching the run took (the base's defaults where the configuration leaves them
+    None), and optionally every stage's arrays."""
 
     xy0: np.ndarray
     xy1: np.ndarray
@@ -273,7 +274,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         stages = {name: array for result in (layout, *results[1:]) for name, array in result.arrays().items()}
         stages.update(_plane_blocks0(planes.level_matches.pairs[:, 0], blocks0))
     counts["views"] = record.views
-    decisions = {"vote": selection.vote, "vote_reason": selection.vote_reason, "views": record.as_dict()}
+    decisions = {"vote": selection.vote, "vote_reason": selection.vote_reason, "views": record.as_dict(),
+                 "detection": detection, "block_matching": matching}
     if final.dtm_frame:
         decisions["global_dtm"] = final.dtm_frame
     return SlimeOutput(final.xy0, final.xy1, final.scores, counts, stages, warnings, decisions)
