@@ -87,11 +87,15 @@ class LearnedPipeline(BasePipeline):
             self.network = learned_weights.xfeat(config.max_keypoints, device)
         self.glue = learned_weights.lightglue(self.extractor, device) if self.matcher == "lightglue" else None
 
+    def _tensor(self, image: np.ndarray) -> torch.Tensor:
+        """(1, 3, H, W) float32 on the pipeline's device of an (H, W, 3) float image, clipped to [0, 1]."""
+        rgb = torch.from_numpy(np.clip(np.ascontiguousarray(image, dtype=np.float32), 0.0, 1.0))
+        return rgb.permute(2, 0, 1)[None].to(self.device)
+
     @torch.inference_mode()
     def extract(self, image: np.ndarray) -> Features:
         """Keypoints (as unit upright LAFs), L2-normalised descriptors and detection scores of an (H, W, 3) image."""
-        rgb = torch.from_numpy(np.clip(np.ascontiguousarray(image, dtype=np.float32), 0.0, 1.0))
-        rgb = rgb.permute(2, 0, 1)[None].to(self.device)
+        rgb = self._tensor(image)
         if self.extractor == "aliked":
             found = self.network(rgb)[0]
             xy, descriptors, scores = found.keypoints, found.descriptors, found.keypoint_scores
@@ -146,8 +150,7 @@ class LearnedPipeline(BasePipeline):
         """(N, D) L2-normalised descriptors of the extractor at the (N, 2) pixel positions ``xy`` of an
         (H, W, 3) image: ALIKED's descriptor head on its dense map, DISK's dense descriptors and XFeat's
         (at 1/8 of its multiple-of-32 resize) sampled bilinearly there."""
-        rgb = torch.from_numpy(np.clip(np.ascontiguousarray(image, dtype=np.float32), 0.0, 1.0))
-        rgb = rgb.permute(2, 0, 1)[None].to(self.device)
+        rgb = self._tensor(image)
         height, width = image.shape[:2]
         if self.extractor == "aliked":
             dense, _ = self.network.extract_dense_map(rgb)
