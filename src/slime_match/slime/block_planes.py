@@ -35,8 +35,8 @@ from .orientations import orientation_bin, relative_orientation
 
 BLOCK_MATCHINGS = ("pairs", "levels")  # how a block pair's first matches are found (module docstring)
 
-__all__ = ["BLOCK_MATCHINGS", "BlockPairMatches", "BlockPlanes", "block_planes", "block_planes_to_original", "distinct_keypoints",
-           "match_block_pairs"]
+__all__ = ["BLOCK_MATCHINGS", "BlockPairMatches", "BlockPlanes", "block_planes", "block_planes_to_original",
+           "distinct_keypoints", "match_block_pairs"]
 
 
 @dataclass
