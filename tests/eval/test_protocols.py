@@ -113,3 +113,18 @@ def test_wxbs_too_few_matches_scores_zero():
     corrs = np.c_[x0, x1]
     assert P.magsac_fundamental(x0, x1, 1.0, 1000) is None
     assert P.wxbs_protocol(x0, x1, corrs, 1.0, 1000) == {"maa": 0.0, "recall": [0.0] * 20}
+
+
+# eleven matches that a Slime run returned on a WxBS pair, on which OpenCV's MAGSAC++ for F raises an assertion
+# (``!model.empty()`` in ``setModelParameters``) instead of finding no model
+USAC_ASSERTS = np.array([
+    [327.276, 302.565, 159.122, 465.709], [247.620, 287.557, 113.342, 459.763], [267.569, 298.483, 121.381, 460.125],
+    [270.332, 279.034, 123.552, 452.611], [250.637, 322.251, 116.020, 475.835], [256.543, 274.773, 116.754, 450.184],
+    [349.394, 284.045, 169.589, 456.198], [328.073, 304.128, 150.696, 473.019], [281.532, 242.954, 128.874, 436.379],
+    [214.771, 270.687, 101.372, 451.369], [328.886, 303.568, 157.564, 471.723]])
+
+
+def test_a_set_opencv_asserts_on_scores_zero_instead_of_stopping_the_bench():
+    x0, x1 = USAC_ASSERTS[:, :2], USAC_ASSERTS[:, 2:]
+    assert P.magsac_fundamental(x0, x1, 3.0, 10000) is None
+    assert P.wxbs_protocol(x0, x1, USAC_ASSERTS, 3.0, 10000)["maa"] == 0.0

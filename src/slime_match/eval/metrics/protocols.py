@@ -29,23 +29,29 @@ CONFIDENCE = 0.999
 
 def magsac_homography(x0: np.ndarray, x1: np.ndarray, threshold: float, max_iters: int) -> np.ndarray | None:
     """(3, 3) homography x0 -> x1 of (K, 2) matches by MAGSAC++ (``threshold`` in px); None with K < 4 or
-    when no model is found."""
+    when no model is found (OpenCV's assertion on a set it finds no model for included)."""
     if len(x0) < 4:
         return None
-    H, _ = cv2.findHomography(
-        np.float64(x0), np.float64(x1), cv2.USAC_MAGSAC, threshold, confidence=CONFIDENCE, maxIters=max_iters
-    )
+    try:
+        H, _ = cv2.findHomography(
+            np.float64(x0), np.float64(x1), cv2.USAC_MAGSAC, threshold, confidence=CONFIDENCE, maxIters=max_iters
+        )
+    except cv2.error:  # OpenCV's USAC asserts on some small sets instead of finding no model
+        return None
     return None if H is None or H.shape != (3, 3) else H
 
 
 def magsac_fundamental(x0: np.ndarray, x1: np.ndarray, threshold: float, max_iters: int) -> np.ndarray | None:
     """(3, 3) fundamental matrix (``x1^T F x0 = 0``) of (K, 2) matches by MAGSAC++ (``threshold`` in px);
-    None with K < 8 or when no model is found."""
+    None with K < 8 or when no model is found (OpenCV's assertion on a set it finds no model for included)."""
     if len(x0) < 8:
         return None
-    F, _ = cv2.findFundamentalMat(
-        np.float64(x0), np.float64(x1), cv2.USAC_MAGSAC, threshold, CONFIDENCE, max_iters
-    )
+    try:
+        F, _ = cv2.findFundamentalMat(
+            np.float64(x0), np.float64(x1), cv2.USAC_MAGSAC, threshold, CONFIDENCE, max_iters
+        )
+    except cv2.error:  # OpenCV's USAC asserts on some small sets instead of finding no model
+        return None
     return None if F is None or F.shape != (3, 3) else F
 
 
