@@ -20,7 +20,6 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import cv2
 import numpy as np
 import torch
 
@@ -29,6 +28,7 @@ from ..features import learned_weights
 from ..geometry.frames import Frame
 from ..matching.nn import match_mutual_nn_ratio
 from ..types import Features, Matches
+from ..views import simulate_view
 from .base import BaseConfig, BasePipeline, _empty_features, _filtered
 
 # registered name -> (extractor, matcher)
@@ -133,11 +133,13 @@ class LearnedPipeline(BasePipeline):
     @torch.inference_mode()
     def describe_fixed(self, context: np.ndarray, features: Features, angle: float) -> Features:
         """``features`` of the (H, W, 3) image ``context`` under orientation ``angle`` (radians): their own at a
-        multiple of a full turn; otherwise described on the image turned by ``-angle`` (bilinear, on a canvas
-        that holds all of it), where a patch whose x axis points along ``angle`` stands upright."""
+        multiple of a full turn; otherwise described on the image turned by ``-angle`` (ASIFT's view of tilt 1:
+        bilinear, on a canvas that holds all of it), where a patch whose x axis points along ``angle`` stands
+        upright."""
         if abs(math.remainder(angle, 2 * math.pi)) < 1e-9 or len(features) == 0:
             return features
-        turned, to_turned = turned_image(context, angle)
+        turned, view = simulate_view(context, 1.0, math.degrees(angle))  # a view of tilt 1: the turn alone
+        to_turned = np.reshape(view.affine, (2, 3))
         xy = features.xy.detach().cpu().double().numpy() @ to_turned[:, :2].T + to_turned[:, 2]
         descriptors = self.describe_at(turned, torch.from_numpy(xy).float().to(self.device))
         laf = unit_frames(features.xy)
@@ -186,22 +188,6 @@ class LearnedPipeline(BasePipeline):
         else:
             summary["matcher"] = GLUE_NAMES[self.extractor].lower()
         return summary
-
-
-def turned_image(image: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
-    """An (H, W, 3) image turned by ``-angle`` radians about its centre, on the smallest canvas that holds it
-    (zero outside), and the (2, 3) affine map from image pixels to the canvas' pixels: a direction at ``angle``
-    in the image points along +x on the canvas."""
-    height, width = image.shape[:2]
-    cos, sin = math.cos(angle), math.sin(angle)
-    linear = np.array([[cos, sin], [-sin, cos]])  # R(-angle)
-    corners = np.array([[0, 0], [width - 1, 0], [0, height - 1], [width - 1, height - 1]], np.float64) @ linear.T
-    low, high = corners.min(0), corners.max(0)
-    to_turned = np.c_[linear, -low]
-    size = tuple(math.ceil(v - 1e-9) + 1 for v in high - low)  # a quarter turn: exactly (H, W) swapped
-    turned = cv2.warpAffine(np.ascontiguousarray(image, np.float32), to_turned, size, flags=cv2.INTER_LINEAR,
-                            borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    return turned, to_turned
 
 
 def _sampled(dense: torch.Tensor, xy: torch.Tensor) -> torch.Tensor:

@@ -207,6 +207,7 @@ def _from_level_pairs(pipeline: BasePipeline, side0: _BlockSide, side1: _BlockSi
         return pipeline.match(level0.features, level1.features, level0.size, level1.size)
 
     found = dict(zip(level_pairs, fork_map(match, len(level_pairs), device_workers(pipeline, workers))))
+    xy = {key: level.features.xy.detach().cpu().numpy().astype(np.float64) for key, level in levels.items()}
     local = [{}, {}]  # per side and block: level index -> index among the block's own features (-1: outside)
 
     def local_index(side: int, w: int) -> np.ndarray:
@@ -219,12 +220,12 @@ def _from_level_pairs(pipeline: BasePipeline, side0: _BlockSide, side1: _BlockSi
 
     out = []
     for w0, w1 in pairs:
-        m = found[id(level_of[0][w0]), id(level_of[1][w1])]
+        key0, key1 = id(level_of[0][w0]), id(level_of[1][w1])
+        m = found[key0, key1]
         i0, i1 = local_index(0, w0)[m.idx0], local_index(1, w1)[m.idx1]
-        m = Matches(i0, i1, m.scores).subset((i0 >= 0) & (i1 >= 0))
-        xy0, xy1 = (side.own(w).xy.detach().cpu().numpy().astype(np.float64)[idx]
-                    for side, w, idx in ((side0, w0, m.idx0), (side1, w1, m.idx1)))
-        out.append((m, xy0, xy1))
+        inside = (i0 >= 0) & (i1 >= 0)
+        out.append((Matches(i0[inside], i1[inside], m.scores[inside]), xy[key0][m.idx0[inside]],
+                    xy[key1][m.idx1[inside]]))
     return out
 
 
