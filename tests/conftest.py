@@ -13,6 +13,7 @@ weights folder beside the repository.
 """
 
 import os
+import socket
 from pathlib import Path
 
 import cv2
@@ -116,6 +117,19 @@ def require(path: Path) -> Path:
     if not path.exists():
         pytest.skip(f"needs {path}")
     return path
+
+
+@pytest.fixture
+def offline(tmp_path, monkeypatch):
+    """An empty torch-hub cache and no network (name resolution fails as it does offline); the cache folder."""
+    monkeypatch.setattr(torch.hub, "_hub_dir", None, raising=False)
+    monkeypatch.setenv("TORCH_HOME", str(tmp_path))
+
+    def no_dns(*args, **kwargs):
+        raise socket.gaierror(socket.EAI_NONAME, "Name or service not known (network cut by the test)")
+
+    monkeypatch.setattr(socket, "getaddrinfo", no_dns)
+    return tmp_path / "hub" / "checkpoints"
 
 
 @pytest.fixture

@@ -45,7 +45,7 @@ def test_the_parser_offers_what_the_code_accepts():
     offered = {action.dest: tuple(action.choices) for action in match._actions if action.choices}
     from slime_match.config import PRESETS
 
-    assert offered["ransac"] == choices.RANSAC_CHOICES and offered["method"] == tuple(PRESETS)
+    assert offered["ransac"] == choices.RANSAC_CHOICES and offered["method"] == ("auto", *PRESETS)
     assert set(methods()) <= set(PRESETS)  # Slime and every base alone, by its name
     assert offered["base"] == BASE_NAMES
     assert offered["detection"] == choices.DETECTIONS and offered["tile_test"] == choices.TILE_TESTS

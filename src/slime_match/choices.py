@@ -18,6 +18,7 @@ ALIKED_MODELS = ("n16", "n16rot", "n32")
 PRESET_NAMES = ("slime", "slime-upright", "slime-rootsift", "slime-fast", "slime-fine", "slime-keynet",
                 "slime-keynet-upright", "slime-aliked", "hz+", "hz+-upright", "rootsift", "rootsift-upright",
                 "keynet", "keynet-upright", *LEARNED_BASES)
+METHOD_CHOICES = ("auto", *PRESET_NAMES)  # "auto": the best preset whose weights are available (auto_method)
 
 SHAPE_METHODS = ("affnet", "baumberg")
 ORIENTATION_METHODS = ("orinet", "gradient", "upright", "fixed")
@@ -37,11 +38,13 @@ VIEW_MODES = ("off", "auto", "always")  # simulated views of image 0 (views.View
 
 # the flat options of one match (make_config's names) that the command line and the web app both offer, with
 # their choices (None: a value read by the option's type); the command line also takes method and weights_dir
+QUARTER_TURN_MODES = ("auto", "off")  # Slime's check of how image 1 is turned (quarter_turns)
 MATCH_OPTIONS = {
     "base": (*BUILTIN_BASES, *LEARNED_BASES), "descriptor": DESCRIPTOR_CHOICES, "shape": SHAPE_METHODS,
     "orientation": ORIENTATION_CHOICES, "upright": None, "ransac": RANSAC_CHOICES, "threshold": None,
     "seed": None, "device": DEVICES, "min_side": None, "max_side": None, "scales": None, "detection": DETECTIONS,
-    "tile_test": TILE_TESTS, "magnification": None, "views": VIEW_MODES, "workers": None,
+    "tile_test": TILE_TESTS, "magnification": None, "views": VIEW_MODES, "quarter_turns": QUARTER_TURN_MODES,
+    "workers": None,
 }
 
 BATCH_BACKENDS = ("local", "ray")  # where `slime pairs` matches its pairs (runs.batch)

@@ -18,7 +18,8 @@ from pathlib import Path
 from typing import Any
 
 from ._runtime.options import check_choice, check_integer, config_from_dict, set_option
-from .choices import DEVICES, LEARNED_BASES, RANSAC_CHOICES
+from .auto_method import AUTO_PRESETS, resolve_auto
+from .choices import DEVICES, LEARNED_BASES, QUARTER_TURN_MODES, RANSAC_CHOICES
 from .errors import ConfigError
 from .io import MIN_IMAGE_SIDE
 from .pipelines import PIPELINES, BaseConfig, base_names, unimplemented
@@ -68,6 +69,11 @@ class MatchConfig:
         views: simulated views of image 0 for extreme viewpoints (ASIFT tilts, :class:`~slime_match.views.
             ViewConfig`): "auto" (default) only when the plain run finds too little consistent geometry,
             "always", "off"; for Slime and for a base pipeline alone.
+        quarter_turns: "auto" (default): Slime on a base whose features are upright by design (ALIKED n16/n32,
+            DISK, XFeat) first checks which quarter turn of image 1 its matches agree with most, and matches
+            image 1 turned when one is the clear winner (:mod:`slime_match.quarter_turns`); "off": never.
+        auto_choice: what the "auto" method took and what it passed over (:mod:`slime_match.auto_method`);
+            empty when a preset was named.
     """
 
     method: str = "slime"
@@ -80,6 +86,8 @@ class MatchConfig:
     min_side: int | str | None = "auto"
     max_side: int | str | None = "auto"
     views: ViewConfig = field(default_factory=ViewConfig)
+    quarter_turns: str = "auto"
+    auto_choice: str = ""
 
     def __post_init__(self) -> None:
         self._check_fields()
@@ -88,6 +96,7 @@ class MatchConfig:
         check_choice("method", self.method, methods())
         check_choice("ransac", self.ransac, RANSAC_CHOICES)
         check_choice("device", self.device, DEVICES)
+        check_choice("quarter_turns", self.quarter_turns, QUARTER_TURN_MODES)
         for name in ("min_side", "max_side"):
             value = getattr(self, name)
             if not (value in ("auto", None) or (isinstance(value, numbers.Integral) and not isinstance(value, bool)
@@ -162,9 +171,10 @@ PRESETS: dict[str, dict[str, Any]] = {
     "slime-fine": {"method": "slime", "base": "hz+", "scales": (1, 2, 3, 4)},
     "slime-keynet": {"method": "slime", "base": "keynet"},
     "slime-keynet-upright": {"method": "slime", "base": "keynet", "upright": True},
-    # Slime on ALIKED + LightGlue: every score maximum of ALIKED (at most 8000 per block scale), LightGlue on
-    # each pair of block scales' whole images (the learned base's default block matching); docs/choosing.md
-    "slime-aliked": {"method": "slime", "base": "aliked-lg", "aliked_threshold": 0.0},
+    # Slime on ALIKED + LightGlue: the 3072 strongest ALIKED score maxima per block scale, LightGlue on each pair
+    # of block scales' whole images (the learned base's default block matching): WxBS mAA 0.57 over three seeds,
+    # as with 8000 keypoints, at 1.8x instead of 2.6x the time of `slime` on graf (docs/evaluation.md)
+    "slime-aliked": {"method": "slime", "base": "aliked-lg", "aliked_threshold": 0.0, "max_keypoints": 3072},
     "hz+": {"method": "hz+"},
     "hz+-upright": {"method": "hz+", "upright": True},
     "rootsift": {"method": "rootsift"},
@@ -190,8 +200,11 @@ def option_path(name: str) -> str:
                       f"{', '.join(SHORT_NAMES)}, or a dotted path such as slime.tiles.t_xi")
 
 
-def make_config(preset: str = "slime", **options: Any) -> MatchConfig:
+def make_config(preset: str = "auto", **options: Any) -> MatchConfig:
     """Build a validated MatchConfig from a preset name (or a registered base pipeline's name) and options.
+
+    "auto" (the default) is the best preset whose weights are available (:mod:`slime_match.auto_method`:
+    ``slime-aliked``, else ``slime``); ``auto_choice`` records what it took and passed over.
 
     Options are given by flat name (``descriptor="tfeat"``, ``workers=1``), short name (``scales=(1, 2)``,
     ``same_homography="set"``) or dotted path (``**{"slime.tiles.t_xi": 12}``); a string value is read by the
@@ -202,9 +215,17 @@ def make_config(preset: str = "slime", **options: Any) -> MatchConfig:
     RANSAC, a ``views.*`` option with the views off, the criterion of "auto" views under "always", or the other
     kind of method's criterion (``views.min_support`` is Slime's, ``views.min_inliers`` a base pipeline's).
     """
-    if not isinstance(preset, str) or (preset not in PRESETS and preset not in base_names()):
-        raise ConfigError(f"unknown method/preset {preset!r}: choose one of {', '.join(PRESETS)}")
-    return with_options(_applied(MatchConfig(), PRESETS.get(preset, {"method": preset})), **options)
+    if not isinstance(preset, str) or (preset not in PRESETS and preset != "auto" and preset not in base_names()):
+        raise ConfigError(f"unknown method/preset {preset!r}: choose auto or one of {', '.join(PRESETS)}")
+    note = ""
+    if preset == "auto":
+        read = PIPELINES[PRESETS[AUTO_PRESETS[0]]["base"]].options | {"name"}
+        preset, note = resolve_auto([key for key, value in options.items() if value is not None and (
+            key == "base" or (option_path(key).startswith("base.") and option_path(key).split(".")[1] not in read))])
+    config = with_options(_applied(MatchConfig(), PRESETS.get(preset, {"method": preset})), **options)
+    if note:
+        config.auto_choice = note
+    return config
 
 
 def with_options(config: MatchConfig, **options: Any) -> MatchConfig:
@@ -245,7 +266,7 @@ def _refuse_unread(config: MatchConfig, given: dict[str, Any]) -> None:
         if path == "threshold" and config.ransac == "none":
             raise ConfigError("threshold is the inlier threshold of the post-processing RANSAC, and ransac is "
                               "'none': choose a RANSAC (ransac=..., --ransac) or drop the threshold")
-        if group == "slime" and not slime:
+        if (group == "slime" or path == "quarter_turns") and not slime:
             raise ConfigError(f"{key!r} is a Slime option, but method {config.method!r} runs the "
                               f"{config.method} pipeline alone (use method 'slime' with base {config.method!r})")
         if group == "base" and rest and rest.split(".")[0] not in read | {"name"}:

@@ -13,6 +13,7 @@ import torch
 from . import __version__
 from ._runtime import compiled
 from ._runtime.timing import StageTimer
+from .auto_method import passed_over
 from .config import MatchConfig, make_config
 from .errors import ConfigError, ImageError, caused_by_interrupt
 from .features.descriptors import AUTO_ORDER, resolve_descriptor
@@ -21,6 +22,7 @@ from .geometry.frames import Frame
 from .io import MIN_IMAGE_SIDE, ImageLike, load_image
 from .pipelines import PIPELINES, make_base_pipeline
 from .pipelines.view_matching import match_views
+from .quarter_turns import check_quarter_turns, turned_frame
 from .resize import pair_factors, resize_image
 from .result import MatchResult
 from .slime.level_cache import LevelCache
@@ -61,6 +63,9 @@ class Matcher:
         self.level_cache = LevelCache(int(feature_cache_mb * 2**20)) if feature_cache_mb > 0 else None
         self.device = resolve_device(self.config.device)
         self.warnings: list[str] = []
+        if passed_over(self.config.auto_choice):
+            logger.warning(self.config.auto_choice)
+            self.warnings.append(self.config.auto_choice)
         base = self.config.base
         if "descriptor" in PIPELINES[base.name].options and base.descriptor == "auto":
             # Key.Net's pipeline describes with networks only
@@ -106,13 +111,20 @@ class Matcher:
                                                   for image, factor in zip((original0, original1), factors))
         stages = None
         warnings = list(self.warnings)
-        decisions: dict[str, str] = {}
+        decisions: dict[str, Any] = {}
+        working1 = _size(array1)
+        if config.method == "slime" and config.quarter_turns == "auto" and self.pipeline.upright_by_design():
+            with timer("quarter_turns"):
+                turn = check_quarter_turns(self.pipeline, array0, array1, config.seed)
+            array1 = np.ascontiguousarray(np.rot90(array1, turn.quarter_turns))
+            frame1 = turned_frame(frame1, _size(original1), turn.quarter_turns)
+            decisions["quarter_turns"] = turn.as_dict()
         if config.method == "slime":
             output = run_slime(self.pipeline, array0, array1, config.slime, timer, seed=config.seed,
                                level_cache=self.level_cache, views=config.views)
             xy0, xy1, scores, counts, stages = output.xy0, output.xy1, output.scores, output.counts, output.stages
             warnings += output.warnings
-            decisions = output.decisions
+            decisions |= output.decisions
         else:
             xy0, xy1, scores, counts, views = self._run_base(array0, array1, timer)
             decisions = {"views": views.as_dict()}
@@ -136,7 +148,7 @@ class Matcher:
             "pipeline": self.pipeline.describe(),
             "device": str(self.device),
             "image_sizes": {"image0": list(original0.shape[1::-1]), "image1": list(original1.shape[1::-1])},
-            "working_sizes": {"image0": list(array0.shape[1::-1]), "image1": list(array1.shape[1::-1])},
+            "working_sizes": {"image0": list(array0.shape[1::-1]), "image1": list(working1)},
             "working_factors": {"image0": list(frame0.factor), "image1": list(frame1.factor)},
             "side_limits": {"min_side": min_side, "max_side": max_side},
             "counts": counts,
@@ -146,11 +158,13 @@ class Matcher:
                         "total": round(time.perf_counter() - start, 4)},
             "warnings": warnings,
         }
+        if config.auto_choice:
+            decisions = {"method": config.auto_choice, **decisions}
         if decisions:
             summary["decisions"] = decisions
         return MatchResult(xy0, xy1, scores, inliers, kind, model, summary, stages,
                            image_sizes=(_size(original0), _size(original1)),
-                           working_sizes=(_size(array0), _size(array1)))
+                           working_sizes=(_size(array0), working1))
 
     def _run_base(self, array0: np.ndarray, array1: np.ndarray, timer: StageTimer):
         pipeline = self.pipeline
@@ -183,12 +197,13 @@ def _size(image: np.ndarray) -> tuple[int, int]:
     return int(image.shape[1]), int(image.shape[0])
 
 
-def match(image0: ImageLike, image1: ImageLike, method: str | MatchConfig = "slime", **options: Any) -> MatchResult:
+def match(image0: ImageLike, image1: ImageLike, method: str | MatchConfig = "auto", **options: Any) -> MatchResult:
     """Match two images.
 
     Args:
         image0, image1: paths, (H, W[, C]) numpy arrays or torch tensors (grey, RGB or RGBA; 8/16-bit or float).
-        method: a preset of :data:`slime_match.config.PRESETS`: "slime" (default), "slime-upright",
+        method: "auto" (default: the best preset whose weights are available, :mod:`slime_match.auto_method`),
+            a preset of :data:`slime_match.config.PRESETS`: "slime", "slime-aliked", "slime-upright",
             "slime-rootsift", "slime-fast", "slime-fine", "hz+", "hz+-upright", "rootsift", "rootsift-upright"...
             or a MatchConfig (from :func:`slime_match.config.make_config`), used as it is.
         **options: flat overrides, e.g. ``descriptor="tfeat"``, ``ransac="fundamental"``, ``threshold=3``,

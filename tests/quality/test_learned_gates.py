@@ -5,8 +5,9 @@ and skip, naming the files, without them.
 The same rule as Slime's gates (:mod:`.test_slime_gates`): correct matches, coverage and protocol mAA keep 85%
 of the measured value, precision stays within 3 points. Pairs solved without simulated views (those cost
 minutes): a planar viewpoint pair, and two WxBS pairs (wide baseline with appearance change, where Slime on
-ALIKED is ahead of both Slime on Hz+ and ALIKED alone) whose mAA moved by at most 0.04 over RANSAC seeds 0, 1
-and 2 (flood moved by 0.12, tyn by 0.47: such pairs would make a gate of chance).
+ALIKED is ahead of both Slime on Hz+ and ALIKED alone, or level with ALIKED alone) whose mAA moved by at most
+0.03 over RANSAC seeds 0, 1 and 2 (zanky moved by 0.28, tyn by 0.59: such pairs would make a gate of chance);
+and graf 1->3 with image 1 turned by 90 degrees, which the quarter-turn check turns back.
 
 Measured with ``python tests/quality/gates.py METHOD PAIR ...`` on a 2-core x86-64 CPU.
 """
@@ -18,9 +19,10 @@ from .gates import measure, shortfalls
 
 MEASURED = {
     "slime-aliked": {
-        "graf/1-4": {"correct": 7191, "precision": 0.966, "coverage": 0.931},
-        "wxbs/rovenki": {"correct": 1175, "precision": 0.586, "maa": 0.932},
-        "wxbs/zanky": {"correct": 558, "precision": 0.924, "maa": 0.596},
+        "graf/1-4": {"correct": 5388, "precision": 0.962, "coverage": 0.883},
+        "graf/1-3@90": {"correct": 7777, "precision": 0.995, "coverage": 0.922},
+        "wxbs/rovenki": {"correct": 1106, "precision": 0.585, "maa": 0.905},
+        "wxbs/kyiv_dolltheater2": {"correct": 154, "precision": 0.667, "maa": 0.872},
     },
     "aliked-lg": {
         "graf/1-3@45": {"correct": 676, "precision": 0.999, "coverage": 0.497},

@@ -12,8 +12,9 @@ from ..choices import (
     DEVICES,
     LEARNED_BASES,
     MATCH_OPTIONS,
+    METHOD_CHOICES,
     ORIENTATION_CHOICES,
-    PRESET_NAMES,
+    QUARTER_TURN_MODES,
     RANSAC_CHOICES,
     SHAPE_METHODS,
     TILE_TESTS,
@@ -28,10 +29,11 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
     everyday = parser.add_argument_group("matching")
     internals = parser.add_argument_group(
         "Slime and base pipeline internals", "the paper's parameters and their variants; any other by --set")
-    everyday.add_argument("--method", default=None, choices=PRESET_NAMES,
-                          help="a preset: Slime (default) and its variants, or a base pipeline alone (the learned "
-                               "ones: ALIKED, DISK or XFeat with LightGlue (-lg) or mutual nearest neighbours "
-                               "(-nn)); the README's table says what each is")
+    everyday.add_argument("--method", default=None, choices=METHOD_CHOICES,
+                          help="a preset: Slime and its variants, or a base pipeline alone (the learned ones: "
+                               "ALIKED, DISK or XFeat with LightGlue (-lg) or mutual nearest neighbours (-nn)); the "
+                               "README's table says what each is. Default auto: slime-aliked when ALIKED's and "
+                               "LightGlue's weights are available, else slime (Hz+); the summary says which")
     internals.add_argument("--base", default=None, choices=(*BUILTIN_BASES, *LEARNED_BASES),
                            help="base pipeline run inside Slime (default hz+)")
     everyday.add_argument("--descriptor", default=None, choices=DESCRIPTOR_CHOICES,
@@ -79,6 +81,10 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
                            help="Slime: which full-resolution tile matches to keep: 'plane' (the default: fits the "
                                 "plane's homography over the whole tile pair, more coverage), 'flow' (the paper's: "
                                 "near a match of the selected planes)")
+    internals.add_argument("--quarter-turns", default=None, choices=QUARTER_TURN_MODES,
+                           help="Slime on a base upright by design (ALIKED, DISK, XFeat): 'auto' (default) first "
+                                "checks which quarter turn of image 1 the matches agree with most and matches it "
+                                "turned when one is the clear winner; 'off': never")
     everyday.add_argument("--views", default=None, choices=VIEW_MODES,
                           help="simulated views of image 0 for extreme viewpoints (ASIFT tilts 2 then 4, for Slime "
                                "and a base pipeline alone): 'auto' (default) only when the plain run finds too "
@@ -164,7 +170,7 @@ def config_of(args: argparse.Namespace):
     if args.config:
         config = with_options(MatchConfig.load(args.config), **options)
     else:
-        config = make_config(options.pop("method") or "slime", **options)
+        config = make_config(options.pop("method") or "auto", **options)
     if getattr(args, "save_stages", False):
         if config.method != "slime":
             raise ConfigError(f"--save-stages writes Slime's stages, but --method {config.method} runs the "

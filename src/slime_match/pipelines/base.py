@@ -20,6 +20,7 @@ Slime also calls these hooks; each has a default built on the part above where o
 * ``detect_keypoints(image)`` and ``describe_keypoints(context, keypoints)``: the detector and the
   description apart, for Slime's "merged" detection (``slime_detection = "merged"`` requires them);
 * ``describe_batch()``: None (a feature set is described whole); ``own_frames_upright()``: False;
+  ``upright_by_design()``: False;
   ``kernel_groups()``: no compiled loops to load before forking; ``describe()``: no parameters to report.
 
 :func:`unimplemented` lists what a class still lacks; ``register_pipeline`` refuses such a class.
@@ -206,6 +207,11 @@ class BasePipeline:
     def own_frames_upright(self) -> bool:
         """Whether ``describe_fixed`` at angle 0 gives exactly (bit for bit) the frames and descriptors that
         ``detect`` and ``describe_keypoints`` gave the features (an upright pipeline's own orientation)."""
+        return False
+
+    def upright_by_design(self) -> bool:
+        """Whether the features are upright whatever the image (no orientation of their own, a network not trained
+        for rotations), so that Slime first checks how image 1 is turned (:mod:`slime_match.quarter_turns`)."""
         return False
 
     def kernel_groups(self) -> tuple[str, ...]:

@@ -174,6 +174,9 @@ class LearnedPipeline(BasePipeline):
     def own_frames_upright(self) -> bool:
         return True  # unit upright frames, described by the network as they are
 
+    def upright_by_design(self) -> bool:
+        return not (self.extractor == "aliked" and self.config.aliked_model == "n16rot")  # n16rot: trained for turns
+
     def kernel_groups(self) -> tuple[str, ...]:
         # mutual NN runs the nearest-neighbour loops of Blob matching on the CPU
         return ("blob",) if self.matcher == "mutual-nn" and self.device.type == "cpu" else ()

@@ -348,9 +348,10 @@ def _core_corners(block: Block) -> np.ndarray:
 
 
 def stages_to_original(stages: dict[str, np.ndarray], frame0: Frame, frame1: Frame) -> dict[str, np.ndarray]:
-    """Stage arrays of images matched in working frames ``frame0``, ``frame1`` (``resize.resize_image``), in
-    original-image pixels: points, block and tile boxes, the planes' image-0 block corners and homographies
-    (orientations stay as measured when matching)."""
+    """Stage arrays of images matched in working frames ``frame0``, ``frame1`` (``resize.resize_image``, image 1
+    perhaps turned by quarter turns: ``quarter_turns.turned_frame``), in original-image pixels: points, block and
+    tile boxes, the planes' image-0 block corners and homographies (orientations stay as measured when
+    matching)."""
     out = dict(stages)
     for image, frame in ((0, frame0), (1, frame1)):
         for key, value in stages.items():
@@ -358,7 +359,8 @@ def stages_to_original(stages: dict[str, np.ndarray], frame0: Frame, frame1: Fra
                 out[key] = frame.to_original(value)
         for key in (f"blocks{image}", f"tiles{image}"):
             boxes = stages[key].copy()
-            boxes[:, 0:2], boxes[:, 2:4] = frame.to_original(boxes[:, 0:2]), frame.to_original(boxes[:, 2:4])
+            corner, other = frame.to_original(boxes[:, 0:2]), frame.to_original(boxes[:, 2:4])
+            boxes[:, 0:2], boxes[:, 2:4] = np.minimum(corner, other), np.maximum(corner, other)  # a turn swaps them
             out[key] = boxes
     out["planes_H"] = homographies_to_original(stages["planes_H"], frame0, frame1)
     corners = stages["planes_corners0"]

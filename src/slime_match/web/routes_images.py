@@ -35,12 +35,12 @@ def add_image_routes(app: FastAPI, state: WebState) -> None:
 
     @app.get("/api/info")
     def info():
-        from ..config import PRESETS
+        from ..choices import METHOD_CHOICES
 
         return {"version": __version__,
                 "folders": [{"name": r.name, "kind": r.kind} for r in state.roots],
                 "runs": list(state.runs),
-                "presets": list(PRESETS),
+                "presets": list(METHOD_CHOICES),  # "auto" first: the default
                 **match_choices(),
                 "max_upload_mb": round(state.max_upload / 2**20, 2),
                 "max_megapixels": state.max_pixels / 1e6,

@@ -30,7 +30,7 @@ def add_job_routes(app: FastAPI, state: WebState) -> None:
     async def match(request: Request):
         body = body_object(await json_body(request), "image0", "image1")
         paths = [state.checked_image(body["image0"]), state.checked_image(body["image1"])]
-        preset = body.get("preset", "slime")
+        preset = body.get("preset", "auto")
         config = match_config(preset, body.get("options") or {}, body.get("settings") or {},
                               bool(body.get("save_stages", True)))
         key = body.get("request")

@@ -30,7 +30,7 @@ async function start() {
   S.info = await api("/api/info");
   $("version").textContent = `slime-match ${S.info.version}`;
   for (const p of S.info.presets) $("preset").append(new Option(p, p));
-  $("preset").value = "slime";
+  $("preset").value = "auto";
   buildOptions(S.info);
   setupTools(S.info);
   await setupPickers();

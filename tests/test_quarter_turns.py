@@ -1,0 +1,95 @@
+"""The quarter-turn check of bases upright by design: the turned frame maps pixels as np.rot90 moves them, the
+check reads the turn of a turned copy, and Slime on ALIKED + LightGlue matches a turned pair as the upright one,
+in the turned image's own pixels."""
+
+import cv2
+import numpy as np
+import pytest
+import torch
+from conftest import require_learned_weights
+from scipy.spatial import cKDTree
+from skimage.data import astronaut
+
+import slime_match as sm
+from slime_match.config import make_config
+from slime_match.errors import ConfigError
+from slime_match.geometry.frames import Frame
+from slime_match.pipelines import make_base_pipeline
+from slime_match.quarter_turns import check_quarter_turns, turned_frame
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+
+@pytest.mark.parametrize("k", [0, 1, 2, 3])
+def test_turned_frame_maps_pixels_as_rot90_moves_them(k):
+    rng = np.random.default_rng(k)
+    original = rng.random((5, 7))  # (H, W)
+    turned = np.rot90(original, k)
+    frame = turned_frame(Frame(), (7, 5), k)
+    ys, xs = np.mgrid[0:5, 0:7]
+    xy = np.stack([xs.ravel(), ys.ravel()], 1).astype(float)
+    moved = np.rint(frame.from_original(xy)).astype(int)
+    assert np.array_equal(turned[moved[:, 1], moved[:, 0]], original[ys.ravel(), xs.ravel()])
+    assert np.allclose(frame.to_original(frame.from_original(xy)), xy)
+
+
+def test_turned_frame_of_a_resized_image_swaps_the_factors_of_an_odd_turn():
+    frame = turned_frame(Frame((0.5, 0.25)), (8, 16), 1)  # an 8 x 16 original matched at 4 x 4
+    assert frame.factor == (0.25, 0.5)
+    # the original's top-right pixel centre (7, 0) comes to the turned working image's top-left corner region
+    assert np.allclose(frame.from_original([[7.5, -0.5]]), [[-0.5, -0.5]])
+
+
+def _pair() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """scikit-image's astronaut at 384 x 384, its copy rotated by 20 degrees and scaled by 0.8 about the centre,
+    and the homography 0 -> 1."""
+    image = cv2.resize(astronaut().astype(np.float32) / 255, (384, 384), interpolation=cv2.INTER_AREA)
+    H = np.vstack([cv2.getRotationMatrix2D((191.5, 191.5), 20.0, 0.8), [0, 0, 1]])
+    return image, cv2.warpPerspective(image, H, (384, 384), flags=cv2.INTER_LINEAR), H
+
+
+def _turn_homography(k: int, size: int = 384) -> np.ndarray:
+    """(3, 3) map of pixels of a size x size image to those of ``np.rot90(image, k)``."""
+    last = size - 1.0
+    return {0: np.eye(3), 1: np.array([[0, 1, 0], [-1, 0, last], [0, 0, 1.0]]),
+            2: np.array([[-1, 0, last], [0, -1, last], [0, 0, 1.0]]),
+            3: np.array([[0, -1, last], [1, 0, 0], [0, 0, 1.0]])}[k]
+
+
+@pytest.mark.parametrize("k", [0, 1, 2, 3])
+def test_the_check_reads_the_turn_back(k):
+    require_learned_weights("aliked-n16", "lightglue-aliked")
+    image0, image1, _ = _pair()
+    pipeline = make_base_pipeline(make_config("slime-aliked").base, torch.device("cpu"))
+    turn = check_quarter_turns(pipeline, image0, np.ascontiguousarray(np.rot90(image1, k)))
+    assert turn.quarter_turns == (4 - k) % 4, turn
+    taken = turn.inliers[turn.quarter_turns]
+    assert all(taken >= 2 * n for i, n in enumerate(turn.inliers) if i != turn.quarter_turns), turn
+    assert turn.as_dict()["degrees"] == 90 * turn.quarter_turns and "consistent matches" in turn.reason
+
+
+def test_slime_on_aliked_matches_a_turned_pair_as_the_upright_one():
+    """A quarter turn of image 1 gives the upright pair's matches, in the turned image's pixels."""
+    require_learned_weights("aliked-n16", "lightglue-aliked")
+    image0, image1, H = _pair()
+    upright = sm.match(image0, image1, "slime-aliked", views="off", device="cpu")
+    turned = sm.match(image0, np.rot90(image1, 1), "slime-aliked", views="off", device="cpu")
+    assert upright.summary["decisions"]["quarter_turns"]["degrees"] == 0
+    assert turned.summary["decisions"]["quarter_turns"]["degrees"] == 270
+    assert turned.summary["working_sizes"] == upright.summary["working_sizes"]
+    assert len(turned.scores) == len(upright.scores) > 1000
+    # the same matches, in an order that the networks' float rounding on the turned image may change among ties
+    expected = cv2.perspectiveTransform(upright.keypoints1[None], _turn_homography(1))[0]
+    distance, _ = cKDTree(np.hstack([upright.keypoints0, expected])).query(
+        np.hstack([turned.keypoints0, turned.keypoints1]))
+    assert np.mean(distance < 0.01) > 0.99
+    projected = cv2.perspectiveTransform(turned.keypoints0[None], _turn_homography(1) @ H)[0]
+    assert np.mean(np.linalg.norm(projected - turned.keypoints1, axis=1) < 3.0) > 0.85
+
+
+def test_quarter_turns_is_a_slime_option():
+    assert make_config("slime-aliked", quarter_turns="off").quarter_turns == "off"
+    with pytest.raises(ConfigError, match="is a Slime option"):
+        make_config("aliked-lg", quarter_turns="off")
+    with pytest.raises(ConfigError, match="quarter_turns"):
+        make_config("slime-aliked", quarter_turns="sometimes")
