@@ -26,7 +26,7 @@ def test_auto_takes_slime_on_aliked_when_its_weights_are_cached():
 def test_options_of_another_base_make_auto_take_it(options, named):
     config = make_config("auto", **options)
     assert config.method == "slime" and config.base.name == options.get("base", "hz+")
-    assert f"as {named} names the base" in config.auto_choice and not passed_over(config.auto_choice)
+    assert config.auto_choice.endswith(f"as given: {named}") and not passed_over(config.auto_choice)
 
 
 def test_missing_learned_weights_are_passed_over_loudly(offline, monkeypatch):
@@ -61,4 +61,4 @@ def test_cli_default_is_auto(capsys, pair, tmp_path):
                            "baumberg", "--orientation", "gradient", "--scales", "1", "--views", "off", "--no-plot")
     assert code == 0, err
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
-    assert summary["decisions"]["method"].startswith("method auto: slime (Slime on Hz+), as ")
+    assert summary["decisions"]["method"].startswith("method auto: slime (Slime on the base the options ask for)")

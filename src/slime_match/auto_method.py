@@ -33,8 +33,8 @@ def resolve_auto(base_options: list[str]) -> tuple[str, str]:
         (preset name, a one-line note of the choice).
     """
     if base_options:
-        return "slime", (f"method auto: slime (Slime on Hz+), as {', '.join(sorted(base_options))} names the base "
-                         "or sets its options")
+        return "slime", (f"method auto: slime (Slime on the base the options ask for), as given: "
+                         f"{', '.join(sorted(base_options))}")
     missing = _missing_learned_weights()
     if missing is None:
         return "slime-aliked", "method auto: slime-aliked (Slime on ALIKED + LightGlue; weights available)"

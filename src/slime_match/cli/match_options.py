@@ -35,7 +35,7 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
                                "README's table says what each is. Default auto: slime-aliked when ALIKED's and "
                                "LightGlue's weights are available, else slime (Hz+); the summary says which")
     internals.add_argument("--base", default=None, choices=(*BUILTIN_BASES, *LEARNED_BASES),
-                           help="base pipeline run inside Slime (default hz+)")
+                           help="base pipeline run inside Slime (default: the preset's; naming one makes --method auto take slime)")
     everyday.add_argument("--descriptor", default=None, choices=DESCRIPTOR_CHOICES,
                           help="Hz+ / Key.Net descriptor; auto = the best whose weights are available: HardNet, "
                                "HardTFeat (TFeat trained with HardNet's loss), TFeat, then RootSIFT (weight-free; "
