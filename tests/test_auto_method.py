@@ -57,8 +57,9 @@ def test_the_summary_names_the_choice(pair):
 
 
 def test_cli_default_is_auto(capsys, pair, tmp_path):
-    code, _, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "out", "--descriptor", "rootsift", "--shape",
+    code, out, err = run_cli(capsys, "match", *pair, "-o", tmp_path / "out", "--descriptor", "rootsift", "--shape",
                            "baumberg", "--orientation", "gradient", "--scales", "1", "--views", "off", "--no-plot")
     assert code == 0, err
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["decisions"]["method"].startswith("method auto: slime (Slime on the base the options ask for)")
+    assert out.startswith(summary["decisions"]["method"] + "\n")  # the choice, then the result line

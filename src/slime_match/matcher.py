@@ -66,6 +66,8 @@ class Matcher:
         if passed_over(self.config.auto_choice):
             logger.warning(self.config.auto_choice)
             self.warnings.append(self.config.auto_choice)
+        elif self.config.auto_choice:
+            logger.info(self.config.auto_choice)
         base = self.config.base
         if "descriptor" in PIPELINES[base.name].options and base.descriptor == "auto":
             # Key.Net's pipeline describes with networks only

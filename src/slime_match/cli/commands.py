@@ -12,6 +12,7 @@ from pathlib import Path
 
 from .. import __version__
 from .._runtime import openmp, progress
+from ..auto_method import passed_over
 from ..choices import CAMERA_MODES
 from ..errors import ConfigError, SlimeMatchError, caused_by_interrupt
 from .match_options import add_match_options, add_workers_option, config_of, parse_shard_option, positive_int
@@ -20,6 +21,9 @@ logger = logging.getLogger("slime_match")
 
 
 def _report(result, out: Path) -> None:
+    choice = result.summary.get("decisions", {}).get("method")
+    if choice and not passed_over(choice):  # a passed-over choice was a warning already
+        print(choice)
     counts = result.summary["counts"]
     line = f"{counts['matches']} matches"
     if "inliers" in counts:
