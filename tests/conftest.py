@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
-from skimage.data import stereo_motorcycle
+from skimage.data import astronaut, stereo_motorcycle
 
 from slime_match.cli import main
 from slime_match.errors import WeightsNotFoundError
@@ -117,6 +117,14 @@ def require(path: Path) -> Path:
     if not path.exists():
         pytest.skip(f"needs {path}")
     return path
+
+
+def rotated_astronaut(angle: float = 20.0, scale: float = 0.8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """scikit-image's astronaut at 384 x 384 and its copy rotated by ``angle`` degrees and scaled by ``scale``
+    about the centre: image 0, image 1 and the homography 0 -> 1."""
+    image = cv2.resize(astronaut().astype(np.float32) / 255, (384, 384), interpolation=cv2.INTER_AREA)
+    H = np.vstack([cv2.getRotationMatrix2D((191.5, 191.5), angle, scale), [0, 0, 1]])
+    return image, cv2.warpPerspective(image, H, (384, 384), flags=cv2.INTER_LINEAR), H
 
 
 @pytest.fixture

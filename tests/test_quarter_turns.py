@@ -6,9 +6,8 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from conftest import require_learned_weights
+from conftest import require_learned_weights, rotated_astronaut
 from scipy.spatial import cKDTree
-from skimage.data import astronaut
 
 import slime_match as sm
 from slime_match.config import make_config
@@ -40,14 +39,6 @@ def test_turned_frame_of_a_resized_image_swaps_the_factors_of_an_odd_turn():
     assert np.allclose(frame.from_original([[7.5, -0.5]]), [[-0.5, -0.5]])
 
 
-def _pair() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """scikit-image's astronaut at 384 x 384, its copy rotated by 20 degrees and scaled by 0.8 about the centre,
-    and the homography 0 -> 1."""
-    image = cv2.resize(astronaut().astype(np.float32) / 255, (384, 384), interpolation=cv2.INTER_AREA)
-    H = np.vstack([cv2.getRotationMatrix2D((191.5, 191.5), 20.0, 0.8), [0, 0, 1]])
-    return image, cv2.warpPerspective(image, H, (384, 384), flags=cv2.INTER_LINEAR), H
-
-
 def _turn_homography(k: int, size: int = 384) -> np.ndarray:
     """(3, 3) map of pixels of a size x size image to those of ``np.rot90(image, k)``."""
     last = size - 1.0
@@ -59,7 +50,7 @@ def _turn_homography(k: int, size: int = 384) -> np.ndarray:
 @pytest.mark.parametrize("k", [0, 1, 2, 3])
 def test_the_check_reads_the_turn_back(k):
     require_learned_weights("aliked-n16", "lightglue-aliked")
-    image0, image1, _ = _pair()
+    image0, image1, _ = rotated_astronaut()
     pipeline = make_base_pipeline(make_config("slime-aliked").base, torch.device("cpu"))
     turn = check_quarter_turns(pipeline, image0, np.ascontiguousarray(np.rot90(image1, k)))
     assert turn.quarter_turns == (4 - k) % 4, turn
@@ -71,7 +62,7 @@ def test_the_check_reads_the_turn_back(k):
 def test_slime_on_aliked_matches_a_turned_pair_as_the_upright_one():
     """A quarter turn of image 1 gives the upright pair's matches, in the turned image's pixels."""
     require_learned_weights("aliked-n16", "lightglue-aliked")
-    image0, image1, H = _pair()
+    image0, image1, H = rotated_astronaut()
     upright = sm.match(image0, image1, "slime-aliked", views="off", device="cpu")
     turned = sm.match(image0, np.rot90(image1, 1), "slime-aliked", views="off", device="cpu")
     assert upright.summary["decisions"]["quarter_turns"]["degrees"] == 0

@@ -219,13 +219,24 @@ def make_config(preset: str = "auto", **options: Any) -> MatchConfig:
         raise ConfigError(f"unknown method/preset {preset!r}: choose auto or one of {', '.join(PRESETS)}")
     note = ""
     if preset == "auto":
-        read = PIPELINES[PRESETS[AUTO_PRESETS[0]]["base"]].options | {"name"}
-        preset, note = resolve_auto([key for key, value in options.items() if value is not None and (
-            key == "base" or (option_path(key).startswith("base.") and option_path(key).split(".")[1] not in read))])
+        preset, note = resolve_auto(_options_of_another_base(options, PIPELINES[PRESETS[AUTO_PRESETS[0]]["base"]]
+                                                             .options))
     config = with_options(_applied(MatchConfig(), PRESETS.get(preset, {"method": preset})), **options)
     if note:
         config.auto_choice = note
     return config
+
+
+def _options_of_another_base(options: dict[str, Any], read: frozenset[str]) -> list[str]:
+    """The given options (None values skipped) that name the base or set a base option outside ``read``."""
+    found = []
+    for key, value in options.items():
+        if value is None:
+            continue
+        group, _, rest = ("base.name" if key == "base" else option_path(key)).partition(".")
+        if group == "base" and (key == "base" or rest.split(".")[0] not in read):
+            found.append(key)
+    return found
 
 
 def with_options(config: MatchConfig, **options: Any) -> MatchConfig:

@@ -9,8 +9,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from conftest import DATA, require, require_learned_weights, run_cli
-from skimage.data import astronaut
+from conftest import DATA, require, require_learned_weights, rotated_astronaut, run_cli
 
 import slime_match as sm
 from slime_match.choices import LEARNED_BASES
@@ -130,15 +129,7 @@ def test_cli_reports_missing_weights_in_one_line(offline, capsys, pair, tmp_path
 # ------------------------------------------------------------------------------------------ with the weights
 
 
-def _rotated_pair(angle: float = 20.0, scale: float = 0.8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """scikit-image's astronaut at 384 x 384 and its copy rotated by ``angle`` degrees and scaled by ``scale``
-    about the centre: image 0, image 1 and the homography 0 -> 1."""
-    image = cv2.resize(astronaut().astype(np.float32) / 255, (384, 384), interpolation=cv2.INTER_AREA)
-    H = np.vstack([cv2.getRotationMatrix2D((191.5, 191.5), angle, scale), [0, 0, 1]])
-    return image, cv2.warpPerspective(image, H, (384, 384), flags=cv2.INTER_LINEAR), H
-
-
-# correct fractions (3 px) measured on _rotated_pair(20, 0.8), views off, CPU: aliked-lg 1.00 (261 matches),
+# correct fractions (3 px) measured on rotated_astronaut(20, 0.8), views off, CPU: aliked-lg 1.00 (261 matches),
 # aliked-nn 0.93 (232), disk-lg 1.00 (714), disk-nn 0.95 (367), xfeat-lg 0.97 (927), xfeat-nn 0.87 (507);
 # the fractions below are 12-14% under them, the match counts about 22% under
 BOUNDS = {"aliked-lg": (0.88, 200), "aliked-nn": (0.8, 180), "disk-lg": (0.88, 550), "disk-nn": (0.82, 280),
@@ -148,7 +139,7 @@ BOUNDS = {"aliked-lg": (0.88, 200), "aliked-nn": (0.8, 180), "disk-lg": (0.88, 5
 @pytest.mark.parametrize("name", LEARNED_BASES)
 def test_rotated_scaled_pair_matches_in_original_pixels(name, device):
     require_learned_weights(*NEEDS[name])
-    image0, image1, H = _rotated_pair()
+    image0, image1, H = rotated_astronaut()
     result = sm.match(image0, image1, name, views="off", device=str(device))
     k = len(result.scores)
     assert result.keypoints0.shape == result.keypoints1.shape == (k, 2) and result.scores.shape == (k,)
@@ -166,7 +157,7 @@ def test_slime_on_aliked_lightglue_matches_the_rotated_pair_in_original_pixels()
     """slime-aliked (views off) on the pair of a known homography: measured 7011 matches, 0.95 of them within
     3 px, on the CPU; the bounds are about 10 points and 20% under."""
     require_learned_weights(*NEEDS["aliked-lg"])
-    image0, image1, H = _rotated_pair()
+    image0, image1, H = rotated_astronaut()
     result = sm.match(image0, image1, "slime-aliked", views="off")
     projected = cv2.perspectiveTransform(result.keypoints0[None], H)[0]
     correct = np.linalg.norm(projected - result.keypoints1, axis=1) < 3.0
@@ -178,7 +169,7 @@ def test_slime_on_aliked_lightglue_matches_the_rotated_pair_in_original_pixels()
 
 def test_results_come_back_in_original_pixels_of_a_shrunk_image():
     require_learned_weights(*NEEDS["aliked-lg"])
-    image0, image1, H = _rotated_pair()
+    image0, image1, H = rotated_astronaut()
     big0, big1 = (cv2.resize(im, (768, 768), interpolation=cv2.INTER_CUBIC) for im in (image0, image1))
     result = sm.match(big0, big1, "aliked-lg", views="off", max_side=384)  # matched at 384 px
     assert result.summary["working_sizes"]["image0"] == [384, 384]
@@ -190,7 +181,7 @@ def test_results_come_back_in_original_pixels_of_a_shrunk_image():
 
 def test_aliked_models_are_selectable():
     require_learned_weights("aliked-n16rot", "aliked-n32", "lightglue-aliked")
-    image0, image1, H = _rotated_pair(60.0, 1.0)
+    image0, image1, H = rotated_astronaut(60.0, 1.0)
     for model in ("n16rot", "n32"):
         result = sm.match(image0, image1, "aliked-lg", views="off", aliked_model=model)
         assert result.summary["pipeline"]["aliked_model"] == model
@@ -200,7 +191,7 @@ def test_aliked_models_are_selectable():
 
 def test_aliked_threshold_zero_keeps_the_strongest_maxima():
     require_learned_weights(*NEEDS["aliked-nn"])
-    image = _rotated_pair()[0]
+    image = rotated_astronaut()[0]
     counts = {}
     for threshold, cap in ((0.2, 4096), (0.0, 4096), (0.0, 300)):
         config = make_config("aliked-nn", aliked_threshold=threshold, max_keypoints=cap)
@@ -215,7 +206,7 @@ def test_learned_features_are_described_again_at_their_keypoints_and_under_a_tur
     quarter the other way (np.rot90: the same pixels), at the same points."""
     require_learned_weights(*NEEDS[name])
     pipeline = make_base_pipeline(make_config(name).base, "cpu")
-    image = _rotated_pair()[0][:, 16:]  # 384 x 368: not square
+    image = rotated_astronaut()[0][:, 16:]  # 384 x 368: not square
     context = pipeline.prepare(image)
     features = pipeline.detect(context)
     assert pipeline.own_frames_upright() and len(features) > 100
@@ -239,7 +230,7 @@ def test_learned_features_are_described_again_at_their_keypoints_and_under_a_tur
 def test_a_black_image_gives_an_empty_result(name):
     require_learned_weights(*NEEDS[name])
     black = np.zeros((96, 128, 3), np.float32)
-    textured = cv2.resize(_rotated_pair()[0], (128, 96), interpolation=cv2.INTER_AREA)
+    textured = cv2.resize(rotated_astronaut()[0], (128, 96), interpolation=cv2.INTER_AREA)
     result = sm.match(black, textured, name, views="off", ransac="magsac-homography")
     assert len(result.scores) == 0 and result.keypoints0.shape == (0, 2) and result.inliers.shape == (0,)
     assert result.summary["counts"]["keypoints0"] == 0 and result.summary["counts"]["keypoints1"] > 10
