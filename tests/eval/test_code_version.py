@@ -15,9 +15,9 @@ def test_code_version_format():
     "git, expected",
     [
         ({}, "0.1.0"),  # no git, or not a checkout
-        ({"rev-parse": "abc1234"}, "0.1.0"),  # a checkout that does not track the package (site-packages)
-        ({"rev-parse": "abc1234", "ls-files": "__init__.py", "status": ""}, "0.1.0+gabc1234"),
-        ({"rev-parse": "abc1234", "ls-files": "__init__.py", "status": " M x.py"}, "0.1.0+gabc1234.dirty"),
+        ({"log": "abc1234"}, "0.1.0"),  # a checkout that does not track the package (site-packages)
+        ({"log": "abc1234", "ls-files": "__init__.py", "status": ""}, "0.1.0+gabc1234"),
+        ({"log": "abc1234", "ls-files": "__init__.py", "status": " M x.py"}, "0.1.0+gabc1234.dirty"),
     ],
 )
 def test_code_version_from_git(monkeypatch, git, expected):

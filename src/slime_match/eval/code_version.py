@@ -1,7 +1,9 @@
-"""Which code produced a cached prediction: the package version plus, in a git checkout, the commit.
+"""Which code produced a cached prediction: the package version plus, in a git checkout, the last commit
+that changed the package's own files.
 
 A benchmark cache outlives the code that filled it; recording the code version with every prediction lets
 the report say which predictions are stale (``slime bench`` warns about them, the time table lists them).
+Commits that touch only docs, tests or scripts leave the version, and so the cached predictions, current.
 """
 
 from __future__ import annotations
@@ -33,9 +35,10 @@ def _git(*args: str) -> str | None:
 
 @lru_cache(maxsize=1)
 def code_version() -> str:
-    """``"<version>"``, or ``"<version>+g<commit>"`` in a git checkout, with ``".dirty"`` appended when the
-    package's own files differ from that commit (e.g. ``"0.1.0+g2185a31.dirty"``)."""
-    commit = _git("rev-parse", "--short", "HEAD")
+    """``"<version>"``, or ``"<version>+g<commit>"`` in a git checkout, where ``<commit>`` is the last commit
+    that changed the package's files, with ``".dirty"`` appended when those files differ from the checked-out
+    commit (e.g. ``"0.1.0+g2185a31.dirty"``)."""
+    commit = _git("log", "-1", "--format=%h", "--", ".")
     if not commit or not _git("ls-files", "__init__.py"):  # not a checkout, or one that does not track us
         return slime_match.__version__
     dirty = _git("status", "--porcelain", "--untracked-files=no", "--", ".")
