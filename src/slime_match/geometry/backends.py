@@ -20,13 +20,17 @@ _CONFIDENCE = 0.999
 def _magsac(
     x0: np.ndarray, x1: np.ndarray, kind: str, threshold: float
 ) -> tuple[np.ndarray | None, np.ndarray]:
-    """OpenCV USAC_MAGSAC (MAGSAC++); OpenCV seeds its USAC generator itself (deterministic)."""
-    if kind == "homography":
-        model, mask = cv2.findHomography(
-            x0, x1, cv2.USAC_MAGSAC, threshold, maxIters=_MAX_ITERATIONS, confidence=_CONFIDENCE
-        )
-    else:
-        model, mask = cv2.findFundamentalMat(x0, x1, cv2.USAC_MAGSAC, threshold, _CONFIDENCE, _MAX_ITERATIONS)
+    """OpenCV USAC_MAGSAC (MAGSAC++); OpenCV seeds its USAC generator itself (deterministic). No model where
+    OpenCV finds none, including where its USAC asserts instead (some small sets of repeated points)."""
+    try:
+        if kind == "homography":
+            model, mask = cv2.findHomography(
+                x0, x1, cv2.USAC_MAGSAC, threshold, maxIters=_MAX_ITERATIONS, confidence=_CONFIDENCE
+            )
+        else:
+            model, mask = cv2.findFundamentalMat(x0, x1, cv2.USAC_MAGSAC, threshold, _CONFIDENCE, _MAX_ITERATIONS)
+    except cv2.error:
+        return None, np.zeros(len(x0), dtype=bool)
     if model is None or model.shape != (3, 3) or mask is None:
         return None, np.zeros(len(x0), dtype=bool)
     return model.astype(np.float64), mask.reshape(-1).astype(bool)
