@@ -34,7 +34,8 @@ RANSAC_CHOICES = ("none", *RANSAC_KINDS,
 
 DETECTIONS = ("scale", "block", "merged")  # how Slime's blocks get keypoints (slime.levels)
 TILE_TESTS = ("plane", "flow")  # Sec. 3.8's test of tile matches; "flow" is the paper's, "plane" the default
-VIEW_MODES = ("off", "auto", "always")  # simulated views of image 0 (views.ViewConfig)
+VIEW_MODES = ("off", "auto", "always")  # simulated views (views.ViewConfig)
+VIEW_IMAGES = ("image0", "image1", "both")  # which images get simulated views (views.ViewConfig)
 
 # the flat options of one match (make_config's names) that the command line and the web app both offer, with
 # their choices (None: a value read by the option's type); the command line also takes method and weights_dir

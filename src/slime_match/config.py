@@ -66,9 +66,9 @@ class MatchConfig:
             Slime, 1024 for a learned base alone, off for the other base pipelines alone); 0, "none" or None:
             off. The two images share one factor when one meets both images' limits, else each gets its own
             (``resize.pair_factors``); the matches are mapped back to original-image pixels.
-        views: simulated views of image 0 for extreme viewpoints (ASIFT tilts, :class:`~slime_match.views.
-            ViewConfig`): "auto" (default) only when the plain run finds too little consistent geometry,
-            "always", "off"; for Slime and for a base pipeline alone.
+        views: simulated views for extreme viewpoints (ASIFT tilts of image 0, image 1 or both,
+            :class:`~slime_match.views.ViewConfig`): "auto" (default) only when the plain run finds too little
+            consistent geometry, "always", "off"; for Slime and for a base pipeline alone.
         quarter_turns: "auto" (default): Slime on a base whose features are upright by design (ALIKED n16/n32,
             DISK, XFeat) first checks which quarter turn of image 1 its matches agree with most, and matches
             image 1 turned when one is the clear winner (:mod:`slime_match.quarter_turns`); "off": never.

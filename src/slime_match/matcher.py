@@ -178,8 +178,8 @@ class Matcher:
         xy0 = features0.xy.detach().cpu().numpy().astype(np.float64)[matches.idx0]
         xy1 = features1.xy.detach().cpu().numpy().astype(np.float64)[matches.idx1]
         with timer("views"):
-            xy0, xy1, scores, views = match_views(pipeline, array0, array1, features1, xy0, xy1, matches.scores,
-                                                  self.config.views, self.config.seed)
+            xy0, xy1, scores, views = match_views(pipeline, array0, array1, features0, features1, xy0, xy1,
+                                                  matches.scores, self.config.views, self.config.seed)
         counts = {"keypoints0": len(features0), "keypoints1": len(features1), "views": views.views}
         return xy0, xy1, scores, counts, views
 

@@ -3,12 +3,13 @@
 A camera looking at a plane from latitude ``arccos(1 / t)`` sees it compressed by the *tilt* ``t`` along one
 direction. ASIFT simulates such views of an image: rotate by ``angle``, blur along x (anti-aliasing, a
 Gaussian of ``0.8 sqrt(t^2 - 1)`` px) and subsample x by ``t``; the rotations are sampled every ``72 / t``
-degrees in [0, 180) (ASIFT's sampling). Matching a simulated view of image 0 against image 1 compensates a
-strong tilt between the two that neither the detector's affine shapes nor the block scales can.
+degrees in [0, 180) (ASIFT's sampling). Matching a simulated view of one image against the other compensates
+a strong tilt between the two that neither the detector's affine shapes nor the block scales can: views of
+image 0 undo a tilt that compresses image 1, views of image 1 one that compresses image 0.
 
-Where views are used: Slime's block stage (``slime.view_planes``: each view is one more set of block levels)
+Where views are used: Slime's block stage (``slime.view_step``: each view is one more set of block levels)
 and a base pipeline alone (``pipelines.view_matching``). Both add them adaptively by default (:class:`ViewConfig`):
-only when the plain run finds too little consistent geometry, one tilt after another.
+only when the plain run finds too little consistent geometry, one (image, tilt) after another.
 """
 
 from __future__ import annotations
@@ -20,11 +21,12 @@ import cv2
 import numpy as np
 
 from ._runtime.options import check_choice, check_integer
-from .choices import VIEW_MODES
+from .choices import VIEW_IMAGES, VIEW_MODES
 from .errors import ConfigError
 from .geometry.frames import Frame
 
-__all__ = ["VIEW_MODES", "View", "ViewConfig", "ViewRecord", "simulate_view", "view_geometry", "views_of_tilt"]
+__all__ = ["VIEW_IMAGES", "VIEW_MODES", "View", "ViewConfig", "ViewRecord", "ViewTry", "simulate_view", "view_geometry",
+           "views_of_tilt"]
 
 ANTIALIAS = 0.8  # ASIFT's blur: sigma = ANTIALIAS * sqrt(t^2 - 1) px before subsampling x by t
 VIEW_BORDER = 2.0  # original px: keypoints of a view closer than this to the image border are dropped
@@ -32,15 +34,17 @@ VIEW_BORDER = 2.0  # original px: keypoints of a view closer than this to the im
 
 @dataclass
 class ViewConfig:
-    """Simulated views of image 0 (ASIFT tilts and rotations).
+    """Simulated views (ASIFT tilts and rotations) and when to add them.
 
     Attributes:
-        mode: "auto" (views only when the plain run finds too little consistent geometry, one tilt after
-            another until it does), "always" (every tilt), "off".
+        mode: "auto" (views only when the plain run finds too little consistent geometry, one (image, tilt)
+            after another until it does), "always" (every tilt of every image asked for), "off".
         tilts: the tilts tried, in order (each with the rotations ``views_of_tilt`` gives it).
+        images: whose views: "image0" (default), "image1", or "both" (per tilt image 0's views, then image
+            1's, as ASIFT simulates both images).
         min_support: Slime's "auto" adds views while F^theta (the planes the epipolar vote kept, Secs.
-            3.6-3.7) holds fewer matches than this; when no tilt reaches it, the views' planes are dropped
-            and the image's own planes decide (views that find no stronger geometry only compete with them).
+            3.6-3.7) holds fewer matches than this; when no view reaches it, the views' planes are dropped
+            and the images' own planes decide (views that find no stronger geometry only compete with them).
         min_inliers: a base pipeline alone adds views while fewer of its matches than this are consistent
             with one fundamental matrix (OpenCV MAGSAC++, 3 px; a base alone finds far fewer matches than
             Slime).
@@ -48,6 +52,7 @@ class ViewConfig:
 
     mode: str = "auto"
     tilts: tuple[float, ...] = (2.0, 4.0)
+    images: str = "image0"
     min_support: int = 100
     min_inliers: int = 50
 
@@ -57,11 +62,17 @@ class ViewConfig:
 
     def validate(self) -> ViewConfig:
         check_choice("views.mode", self.mode, VIEW_MODES)
+        check_choice("views.images", self.images, VIEW_IMAGES)
         check_integer("views.min_support", self.min_support, 1)
         check_integer("views.min_inliers", self.min_inliers, 8)
         if not all(t > 1.0 for t in self.tilts):
             raise ConfigError(f"views.tilts must all be > 1 (1 is the image itself), got {self.tilts}")
         return self
+
+    def schedule(self) -> list[tuple[int, float]]:
+        """The (image, tilt) steps in the order they are tried: per tilt, image 0's views before image 1's."""
+        images = {"image0": (0,), "image1": (1,), "both": (0, 1)}[self.images]
+        return [(image, tilt) for tilt in self.tilts for image in images]
 
 
 @dataclass(frozen=True)
@@ -154,24 +165,56 @@ def views_of_tilt(tilt: float) -> list[float]:
 
 
 @dataclass
+class ViewTry:
+    """One (image, tilt) step of the views: its ``views`` of ``image`` (0 or 1) at ``tilt`` and, for Slime,
+    the block ``planes`` they found, the matches of F^theta on those planes (``ftheta_matches``; 0 when the
+    views' planes were dropped) and, per view angle in degrees whose planes hold some, how many
+    (``ftheta_by_angle``)."""
+
+    image: int
+    tilt: float
+    views: int
+    planes: int | None = None
+    ftheta_matches: int | None = None
+    ftheta_by_angle: dict[str, int] = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        out = {"image": self.image, "tilt": self.tilt, "views": self.views}
+        if self.planes is not None:
+            out.update(planes=self.planes, ftheta_matches=self.ftheta_matches, ftheta_by_angle=self.ftheta_by_angle)
+        return out
+
+
+@dataclass
 class ViewRecord:
     """What the view synthesis did for one pair (for ``summary.json``).
 
     Attributes:
-        mode: the ``ViewConfig.mode``.
-        tilts: the tilts tried, in order; views: how many views they simulated.
-        reason: why the views stopped (or why none was tried).
-        found: Slime only, per tilt tried: its ``views``, the block ``planes`` they found, the matches of
-            F^theta on those planes (``ftheta_matches``; 0 when the views' planes were dropped) and, per view
-            angle in degrees whose planes hold some, how many (``ftheta_by_angle``).
+        mode, images: the ``ViewConfig``'s.
+        tried: the (image, tilt) steps run, in order.
+        decision: "off", "not needed" (auto: the plain run had enough geometry), "kept" (the views' planes or
+            matches stay) or "dropped" (auto: no view reached the support asked for, the plain run's result is
+            kept).
+        reason: why the views stopped (or why none was tried), in words.
     """
 
     mode: str
-    tilts: list[float] = field(default_factory=list)
-    views: int = 0
+    images: str = "image0"
+    tried: list[ViewTry] = field(default_factory=list)
+    decision: str = "off"
     reason: str = "views off"
-    found: list[dict] = field(default_factory=list)
+
+    @property
+    def views(self) -> int:
+        """How many views were simulated."""
+        return sum(step.views for step in self.tried)
+
+    @property
+    def tilts(self) -> list[float]:
+        """The tilts tried, in order, each once."""
+        return list(dict.fromkeys(step.tilt for step in self.tried))
 
     def as_dict(self) -> dict:
-        out = {"mode": self.mode, "tilts": self.tilts, "views": self.views, "reason": self.reason}
-        return {**out, "found": self.found} if self.found else out
+        out = {"mode": self.mode, "images": self.images, "tilts": self.tilts, "views": self.views,
+               "decision": self.decision, "reason": self.reason}
+        return {**out, "tried": [step.as_dict() for step in self.tried]} if self.tried else out

@@ -86,7 +86,28 @@ def test_pairs_without_matches_are_counted_and_listed(hard_run, tmp_path, capsys
     assert f"| {name} |" in (out / "table.md").read_text().split("per pair")[0]
 
 
-def test_the_views_a_run_added_are_kept_and_shown_per_pair(hard_run):
+NEW_RECORD = {"mode": "auto", "images": "image0", "tilts": [2.0, 4.0], "views": 15, "decision": "kept",
+              "reason": "every view tried",
+              "tried": [{"image": 0, "tilt": 2.0, "views": 5, "planes": 3, "ftheta_matches": 0, "ftheta_by_angle": {}},
+                        {"image": 0, "tilt": 4.0, "views": 10, "planes": 40, "ftheta_matches": 63,
+                         "ftheta_by_angle": {"18": 50, "36": 20}}]}
+EARLIER_RECORD = {"mode": "auto", "tilts": [2.0, 4.0], "views": 15, "reason": "every tilt tried",  # before "tried"
+                  "found": [{"tilt": 2.0, "views": 5, "planes": 3, "ftheta_matches": 0, "ftheta_by_angle": {}},
+                            {"tilt": 4.0, "views": 10, "planes": 40, "ftheta_matches": 63,
+                             "ftheta_by_angle": {"18": 50, "36": 20}}]}
+BOTH_RECORD = {"mode": "always", "images": "both", "tilts": [2.0], "views": 10, "decision": "kept",
+               "reason": "every view tried",
+               "tried": [{"image": 0, "tilt": 2.0, "views": 5, "planes": 3, "ftheta_matches": 0, "ftheta_by_angle": {}},
+                         {"image": 1, "tilt": 2.0, "views": 5, "planes": 9, "ftheta_matches": 40,
+                          "ftheta_by_angle": {"0": 40}}]}
+
+
+@pytest.mark.parametrize("views, note", [
+    (NEW_RECORD, "(views: tilt 2 [0], 4 [63 at 18, 36])"),
+    (EARLIER_RECORD, "(views: tilt 2 [0], 4 [63 at 18, 36])"),
+    (BOTH_RECORD, "(views: image 0 tilt 2 [0], image 1 tilt 2 [40 at 0])"),
+])
+def test_the_views_a_run_added_are_kept_and_shown_per_pair(hard_run, views, note):
     """A prediction's recorded decisions (summary.json's) reach metrics.json and the per-pair protocol table."""
     out, argv = hard_run
     bench.main(argv)
@@ -94,17 +115,13 @@ def test_the_views_a_run_added_are_kept_and_shown_per_pair(hard_run):
     label, name = next(iter(summary["methods"])), summary["pairs"][0]["name"]
     path = out / "predictions" / label / f"{pair_slug(name)}.npz"
     saved = dict(np.load(path))
-    views = {"mode": "auto", "tilts": [2.0, 4.0], "views": 15, "reason": "every tilt tried",
-             "found": [{"tilt": 2.0, "views": 5, "planes": 3, "ftheta_matches": 0, "ftheta_by_angle": {}},
-                       {"tilt": 4.0, "views": 10, "planes": 40, "ftheta_matches": 63,
-                        "ftheta_by_angle": {"18": 50, "36": 20}}]}
     np.savez(path, **saved | {"decisions": np.str_(json.dumps({"views": views}))})
     assert bench.main(argv) == 0
     summary = json.loads((out / "metrics.json").read_text())
     assert summary["pairs"][0]["methods"][label]["views"] == views
     assert "views" not in summary["pairs"][1]["methods"][label]  # SIFT records none
     rows = [line for line in (out / "table.md").read_text().splitlines() if line.startswith(f"| {name} |")]
-    assert rows[-1].endswith("(views: tilt 2 [0], 4 [63 at 18, 36]) |"), rows
+    assert rows[-1].endswith(f"{note} |"), rows
 
 
 def test_protocol_options():

@@ -112,6 +112,34 @@ def test_block_planes_gathers_the_refined_planes_in_original_pixels(levels):
     assert arrays["table_weight"].sum() == len(raw)
 
 
+def test_planes_found_with_the_images_exchanged_turn_round_to_image_0_to_image_1(levels):
+    """A simulated view of image 1 takes image 0's part in Secs. 3.2-3.3; ``swapped`` turns its planes round:
+    homographies inverted, keypoints, orientations and scales exchanged, the same rows. Exchanged back, the
+    planes are the ones found."""
+    pipeline, blocks, _, _, _ = levels
+    image, moved = _moved_squares()  # moved = image shifted by (6, 4) px
+    levels0, levels1 = build_levels(pipeline, image, blocks), build_levels(pipeline, moved, blocks)
+    found = block_planes(pipeline, levels1, levels0, blocks, blocks, HomographyRansacConfig(threshold=15.0))
+    planes = found.swapped()
+    assert len(planes.H) == len(found.H) > 0
+    np.testing.assert_array_equal(planes.level_matches.pairs, found.level_matches.pairs[:, ::-1])
+    np.testing.assert_array_equal(planes.raw.xy0, found.raw.xy1)
+    np.testing.assert_array_equal(planes.table.angle1, found.table.angle0)
+    np.testing.assert_array_equal(planes.raw.scale0, found.raw.scale1)
+    np.testing.assert_allclose(planes.H @ found.H, np.broadcast_to(np.eye(3), found.H.shape), atol=1e-8)
+    for plane in range(len(planes.H)):  # image 0 -> image 1: the shift
+        xy0 = planes.raw.xy0[planes.raw.source == plane]
+        mapped, _ = project(planes.H[plane], xy0)
+        assert np.median(np.linalg.norm(mapped - xy0 - [6, 4], axis=1)) < 1.0
+    assert np.median(np.abs(planes.table.rho)) < 0.3  # no turn between the images, in either order
+    assert np.all(planes.side == 1.0)
+    back = planes.swapped()
+    np.testing.assert_allclose(back.H, found.H, rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(back.level_matches.xy0, found.level_matches.xy0)
+    np.testing.assert_allclose(np.cos(back.level_matches.theta), np.cos(found.level_matches.theta), atol=1e-12)
+    np.testing.assert_array_equal(back.table.xy1, found.table.xy1)
+
+
 def test_a_shared_fixed_descriptors_describes_image_1_once(levels, monkeypatch):
     """The plain blocks and the simulated views pair image 0's levels with the same image-1 levels: with one
     ``FixedDescriptors`` for both calls, the second describes none of image 1's features again and finds the

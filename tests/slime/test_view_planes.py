@@ -1,5 +1,6 @@
-"""Simulated views end to end on a real tilted pair (graf 1 -> 3, exact GT): Slime's view planes map back
-to the original frame, a base pipeline alone pools its views' matches, and "auto" records why it stopped."""
+"""Simulated views end to end on a real tilted pair (graf 1 -> 3, exact GT): Slime's view planes, of image 0 or
+of image 1, map back to the original frames, a base pipeline alone pools its views' matches, and the views step
+records what it tried, what it decided and why."""
 
 import re
 
@@ -24,13 +25,15 @@ def test_slime_view_planes_hold_the_pairs_geometry(graf_small):  # noqa: F811
     result = Matcher(make_config("slime", views="always", scales=(1, 2), keep_stages=True,
                                  **{"views.tilts": (2.0,)}, **WEIGHT_FREE))(a, b)
     views = result.summary["decisions"]["views"]
-    found = views.pop("found")
-    assert views == {"mode": "always", "tilts": [2.0], "views": 5, "reason": "every tilt tried"}
+    found = views.pop("tried")
+    assert views == {"mode": "always", "images": "image0", "tilts": [2.0], "views": 5, "decision": "kept",
+                     "reason": "every view tried"}
     assert result.summary["counts"]["views"] == 5
     stages = result.stages
     from_view = stages["planes_pairs"][:, 0] >= len(stages["blocks0"])
     assert from_view.sum() >= 5, "the views of a 40-degree viewpoint change give planes"
-    assert found[0]["tilt"] == 2.0 and found[0]["views"] == 5 and found[0]["planes"] == from_view.sum()
+    assert found[0]["image"] == 0 and found[0]["tilt"] == 2.0 and found[0]["views"] == 5
+    assert found[0]["planes"] == from_view.sum()
     on_view_planes = np.zeros(len(stages["table_xy0"]), bool)  # F^theta's matches on the views' planes
     for s in np.flatnonzero(from_view[stages["ftheta_plane"]]):
         on_view_planes[stages["ftheta_indices"][stages["ftheta_indptr"][s]:stages["ftheta_indptr"][s + 1]]] = True
@@ -38,8 +41,9 @@ def test_slime_view_planes_hold_the_pairs_geometry(graf_small):  # noqa: F811
     by_angle = found[0]["ftheta_by_angle"]  # the views that found them: ASIFT's angles at tilt 2 (36 deg apart)
     assert by_angle and set(by_angle) <= {"0", "36", "72", "108", "144"}
     assert max(by_angle.values()) <= found[0]["ftheta_matches"] <= sum(by_angle.values())
-    views = stages["planes_view"]  # each plane's image-0 block: its view and its outline in original px
+    views = stages["planes_view0"]  # each plane's image-0 block: its view and its outline in original px
     assert np.all(views[from_view, 0] == 2.0) and np.all(views[~from_view] == [1.0, 0.0])
+    assert np.all(stages["planes_view1"] == [1.0, 0.0])
     boxes = stages["blocks0"][stages["planes_pairs"][~from_view, 0]]
     np.testing.assert_allclose(stages["planes_corners0"][~from_view],
                                boxes[:, [0, 1, 2, 1, 2, 3, 0, 3]].reshape(-1, 4, 2), atol=1e-9)
@@ -61,24 +65,60 @@ def test_slime_view_planes_hold_the_pairs_geometry(graf_small):  # noqa: F811
     assert ok.mean() >= 0.9 and ok.sum() > 500
 
 
+def test_views_of_image_1_hold_the_pairs_geometry_with_the_images_exchanged(graf_small):  # noqa: F811
+    """graf 3 -> 1: the views of image 1 (graf 1) compensate the tilt as image 0's views do for graf 1 -> 3;
+    their planes map image 0 to image 1 like every plane, and their blocks are image 1's."""
+    a, b, h = graf_small
+    inverse = np.linalg.inv(h)
+    result = Matcher(make_config("slime", views="always", scales=(1, 2), keep_stages=True,
+                                 **{"views.tilts": (2.0,), "views.images": "image1"}, **WEIGHT_FREE))(b, a)
+    record = result.summary["decisions"]["views"]
+    assert record["images"] == "image1" and record["decision"] == "kept"
+    step, = record["tried"]
+    assert (step["image"], step["tilt"], step["views"]) == (1, 2.0, 5) and step["ftheta_matches"] > 0
+    stages = result.stages
+    from_view = stages["planes_pairs"][:, 1] >= len(stages["blocks1"])
+    assert from_view.sum() == step["planes"] >= 5
+    assert np.all(stages["planes_pairs"][:, 0] < len(stages["blocks0"]))  # image 0's own blocks
+    assert np.all(stages["planes_view1"][from_view, 0] == 2.0) and np.all(stages["planes_view0"] == [1.0, 0.0])
+    for plane in np.flatnonzero(from_view):  # a view plane's matches lie in its block's outline in image 1
+        quad = stages["planes_corners1"][plane].astype(np.float32)
+        points = stages["block_matches_xy1"][stages["block_matches_plane"] == plane]
+        assert all(cv2.pointPolygonTest(quad, (float(x), float(y)), True) > -1.0 for x, y in points)
+    in_view = from_view[stages["block_matches_plane"]]
+    ok = correct_matches_homography(stages["block_matches_xy0"][in_view], stages["block_matches_xy1"][in_view],
+                                    inverse)
+    assert ok.mean() >= 0.8, ok.mean()
+    for plane in np.flatnonzero(from_view)[:3]:  # image 0 -> image 1, as the pair's GT
+        points = stages["block_matches_xy0"][stages["block_matches_plane"] == plane]
+        p = np.c_[points, np.ones(len(points))]
+        mine, truth = p @ stages["planes_H"][plane].T, p @ inverse.T
+        error = np.linalg.norm(mine[:, :2] / mine[:, 2:] - truth[:, :2] / truth[:, 2:], axis=1)
+        assert np.median(error) < 5.0
+    ok = _correct(result, inverse)
+    assert ok.mean() >= 0.9 and ok.sum() > 500
+
+
 def test_auto_views_stop_when_the_plain_run_agrees_and_leave_it_when_they_find_nothing_stronger(graf_small):  # noqa: F811
     a, b, _ = graf_small
     options = {"scales": (1, 2), **WEIGHT_FREE}
     result = Matcher(make_config("slime", **options))(a, b)
     views = result.summary["decisions"]["views"]
     assert views["mode"] == "auto" and views["views"] == 0 and views["tilts"] == []
+    assert views["decision"] == "not needed" and "tried" not in views
     assert re.fullmatch(r"enough matches consistent with the planes' epipolar geometry \(F\^theta\): \d+ >= 100",
                         views["reason"]), views["reason"]
     off = Matcher(make_config("slime", views="off", **options))(a, b)
     assert off.summary["decisions"]["views"]["reason"] == "views off"
+    assert off.summary["decisions"]["views"]["decision"] == "off"
     # views that never reach the support asked for are tried, and their planes dropped: the plain run's matches
     unreached = Matcher(make_config("slime", **{"views.tilts": (2.0,), "views.min_support": 10**9}, **options))(a, b)
     record = unreached.summary["decisions"]["views"]
-    assert record["views"] == 5 and record["tilts"] == [2.0] and re.fullmatch(
-        r"every tilt tried, and still too few matches consistent with the planes' epipolar geometry \(F\^theta\): "
-        r"\d+ < 1000000000: the planes of the image alone are kept", record["reason"])
-    assert record["found"][0]["planes"] > 0 and record["found"][0]["ftheta_matches"] == 0  # dropped
-    assert record["found"][0]["ftheta_by_angle"] == {}
+    assert record["views"] == 5 and record["tilts"] == [2.0] and record["decision"] == "dropped" and re.fullmatch(
+        r"every view tried, and still too few matches consistent with the planes' epipolar geometry \(F\^theta\): "
+        r"\d+ < 1000000000: the planes of the images alone are kept", record["reason"])
+    assert record["tried"][0]["planes"] > 0 and record["tried"][0]["ftheta_matches"] == 0  # dropped
+    assert record["tried"][0]["ftheta_by_angle"] == {}
     for other in (result, unreached):  # auto without views, or with views dropped = off
         np.testing.assert_array_equal(other.keypoints0, off.keypoints0)
         np.testing.assert_array_equal(other.keypoints1, off.keypoints1)
@@ -95,6 +135,13 @@ def test_base_pipeline_pools_its_views_matches(graf_small):  # noqa: F811
     assert np.all(np.diff(viewed.scores) >= 0)  # pooled matches sorted by score
     height, width = a.shape[:2]
     assert np.all((viewed.keypoints0 >= -0.5) & (viewed.keypoints0 <= [width - 0.5, height - 0.5]))
+    turned = Matcher(make_config("hz+", views="always", **{"views.tilts": (2.0,), "views.images": "image1"},
+                                 **WEIGHT_FREE))(b, a)  # graf 3 -> 1: image 1's views pool the same way
+    plain_turned = Matcher(make_config("hz+", views="off", **WEIGHT_FREE))(b, a)
+    assert [step["image"] for step in turned.summary["decisions"]["views"]["tried"]] == [1]
+    inverse = np.linalg.inv(h)
+    assert _correct(turned, inverse).sum() > _correct(plain_turned, inverse).sum()
+    assert np.all((turned.keypoints1 >= -0.5) & (turned.keypoints1 <= [width - 0.5, height - 0.5]))
     auto = Matcher(make_config("hz+", **WEIGHT_FREE))(a, b)
     record = auto.summary["decisions"]["views"]
     assert record["mode"] == "auto" and re.fullmatch(

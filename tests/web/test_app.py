@@ -262,6 +262,46 @@ def test_unknown_job(client):
     assert client.post("/api/jobs/nope/cancel", headers=POST).status_code == 404
 
 
+def test_stage_files_of_earlier_versions_show_image_0s_views(tmp_path):
+    """Stage files written before each image's blocks were recorded name image 0's views ``planes_view``."""
+    from slime_match.io import save_npz
+    from slime_match.web.payloads import stages_payload
+
+    from .conftest import synthetic_stages
+
+    stages = synthetic_stages(np.random.default_rng(0))
+    stages["planes_view"] = stages.pop("planes_view0")
+    for key in ("planes_corners1", "planes_view1"):
+        del stages[key]
+    save_npz(tmp_path / "stages.npz", **stages)
+    planes = stages_payload(tmp_path)["layers"]["planes"]
+    assert planes["views0"][3] == [4.0, 18.0] and "corners1" not in planes and "views1" not in planes
+
+
+def test_the_decisions_of_a_run_read_as_lines():
+    from slime_match.web.payloads import decision_lines
+
+    views = {"mode": "auto", "images": "both", "tilts": [2.0], "views": 10, "decision": "kept",
+             "reason": "enough matches consistent with the planes' epipolar geometry (F^theta): 140 >= 100",
+             "tried": [{"image": 0, "tilt": 2.0, "views": 5, "planes": 3, "ftheta_matches": 0, "ftheta_by_angle": {}},
+                       {"image": 1, "tilt": 2.0, "views": 5, "planes": 9, "ftheta_matches": 140,
+                        "ftheta_by_angle": {"0": 100, "36": 40}}]}
+    lines = decision_lines({"method": "slime-aliked (its weights are cached)", "views": views, "vote": "consensus",
+                            "vote_reason": "3 homographies share F", "detection": "scale", "block_matching": "levels",
+                            "global_dtm": "image 0's own frame"})
+    assert lines == [
+        "method: slime-aliked (its weights are cached)",
+        "simulated views (auto, of both images): kept: enough matches consistent with the planes' epipolar "
+        "geometry (F^theta): 140 >= 100",
+        "  image 0, tilt 2: 5 views, 3 planes, 0 matches kept in F^theta",
+        "  image 1, tilt 2: 5 views, 9 planes, 140 matches kept in F^theta (100 at 0 deg, 40 at 36 deg)",
+        "epipolar vote: consensus (3 homographies share F)",
+        "blocks: scale detection, matched by levels",
+        "final DTM: image 0's own frame",
+    ]
+    assert decision_lines({}) == []
+
+
 # ---------------------------------------------------------------------------------------------- runs
 
 
@@ -278,7 +318,8 @@ def test_runs_and_their_pairs(client):
                                       "final"]
     planes = stages["layers"]["planes"]
     assert planes["label"][:3] == [0, 0, 0] and len(planes["H"]) == 4 and planes["block_pairs"][3] == [7, 1]
-    assert planes["views"][3] == [4.0, 18.0] and planes["corners0"][3][1] == [200.0, 60.0]
+    assert planes["views0"][3] == [4.0, 18.0] and planes["corners0"][3][1] == [200.0, 60.0]
+    assert planes["views1"][3] == [1.0, 0.0] and planes["corners1"][3][0] == [0.0, 0.0]
     assert stages["layers"]["fbar"]["sets"] == 2 and stages["counts"] == {"matches": MANY}
     assert client.get("/api/runs/run/pairs/0/files/matches.npz").status_code == 200
     assert client.get("/api/runs/run/pairs/1/stages").status_code == 404

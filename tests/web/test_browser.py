@@ -66,6 +66,10 @@ def test_match_two_images_see_count_and_stage_layers(browser, server, shots):
     assert any(s.startswith("features:") for s in stages) and any(s.startswith("global_dtm:") for s in stages)
 
     until(lambda: browser.find_elements("id", "layer-planes"), 60, "the stage layers")
+    browser.find_element("css selector", "#decisions summary").click()  # the adaptive steps, in words
+    decisions = [li.text for li in browser.find_elements("css selector", "#decisions-list li")]
+    assert any(d.startswith("simulated views (") for d in decisions), decisions
+    assert any(d.startswith("epipolar vote: ") for d in decisions), decisions
     settle(browser)
     browser.save_screenshot(str(shots / "match-done.png"))
     # a keypoint clicked shows its match

@@ -146,18 +146,23 @@ def _protocol_tables(summary: dict[str, Any], agg: dict[str, Any]) -> list[str]:
 
 def _views_note(views: dict[str, Any] | None) -> str:
     """" (views: tilt 2, 4)" when a run added simulated views, else ""; Slime's runs add the F^theta matches on
-    each tilt's planes and the view angles (degrees) that found them, " (views: tilt 2 [0], 4 [63 at 18, 36])"."""
+    each step's planes and the view angles (degrees) that found them, " (views: tilt 2 [0], 4 [63 at 18, 36])";
+    views of image 1 are named, " (views: image 1 tilt 2 [40 at 0])". Reads records without ``tried`` (image 0's
+    tilts and their ``found`` counts) too."""
     if not views or not views.get("views"):
         return ""
     found = {f["tilt"]: f for f in views.get("found", [])}
+    steps = views.get("tried") or [{"image": 0, "tilt": t, **found.get(t, {})} for t in views["tilts"]]
+    named = any(step["image"] == 1 for step in steps)
 
-    def tilt(t: float) -> str:
-        if t not in found:
-            return f"{t:g}"
-        angles = ", ".join(found[t].get("ftheta_by_angle", {}))
-        return f"{t:g} [{found[t]['ftheta_matches']}" + (f" at {angles}" if angles else "") + "]"
+    def step_note(step: dict[str, Any]) -> str:
+        text = (f"image {step['image']} tilt " if named else "") + f"{step['tilt']:g}"
+        if "ftheta_matches" not in step:
+            return text
+        angles = ", ".join(step.get("ftheta_by_angle", {}))
+        return text + f" [{step['ftheta_matches']}" + (f" at {angles}" if angles else "") + "]"
 
-    return " (views: tilt " + ", ".join(tilt(t) for t in views["tilts"]) + ")"
+    return " (views: " + ("" if named else "tilt ") + ", ".join(step_note(step) for step in steps) + ")"
 
 
 def csv_table(summary: dict[str, Any], agg: dict[str, Any]) -> str:

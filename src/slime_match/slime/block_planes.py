@@ -36,7 +36,7 @@ from .orientations import orientation_bin, relative_orientation
 BLOCK_MATCHINGS = ("pairs", "levels")  # how a block pair's first matches are found (module docstring)
 
 __all__ = ["BLOCK_MATCHINGS", "BlockPairMatches", "BlockPlanes", "block_planes", "block_planes_to_original",
-           "distinct_keypoints", "match_block_pairs"]
+           "distinct_keypoints", "match_block_pairs", "plane_sides"]
 
 
 @dataclass
@@ -46,7 +46,8 @@ class BlockPairMatches:
     Attributes:
         pairs: (P, 2) block indices (w in image 0, w' in image 1) of the pairs that produced a plane.
         H: (P, 3, 3) homographies from scaled image 0 (of block w) to scaled image 1 (of block w').
-        theta: (P,) plane orientation theta* (radians) used for the refined run.
+        theta: (P,) orientation of image 1's patches against image 0's (radians) in the refined run: theta*
+            (image 1's turned by it; for a simulated view of image 1, image 0's turned by -theta).
         match_pair: (M,) index into ``pairs`` of each match.
         xy0, xy1: (M, 2) matched keypoints in the scaled images.
         scale0, scale1: (M,) patch scales in scaled-image pixels.
@@ -63,13 +64,19 @@ class BlockPairMatches:
     scale1: np.ndarray
     scores: np.ndarray
 
-    def joined(self, other: BlockPairMatches, block_offset: int) -> BlockPairMatches:
-        """These planes followed by ``other``'s, whose image-0 block indices are shifted by ``block_offset``."""
-        pairs = np.concatenate([self.pairs, other.pairs + np.array([block_offset, 0])])
+    def joined(self, other: BlockPairMatches, offset0: int, offset1: int = 0) -> BlockPairMatches:
+        """These planes followed by ``other``'s, whose block indices are shifted by ``offset0`` in image 0 and
+        ``offset1`` in image 1."""
+        pairs = np.concatenate([self.pairs, other.pairs + np.array([offset0, offset1])])
         return BlockPairMatches(pairs, np.concatenate([self.H, other.H]), np.concatenate([self.theta, other.theta]),
                                 np.concatenate([self.match_pair, other.match_pair + len(self.pairs)]),
                                 *(np.concatenate([getattr(self, k), getattr(other, k)])
                                   for k in ("xy0", "xy1", "scale0", "scale1", "scores")))
+
+    def swapped(self) -> BlockPairMatches:
+        """The same planes with the two images' roles exchanged (found with image 1's blocks as image 0's)."""
+        return BlockPairMatches(self.pairs[:, ::-1].copy(), np.linalg.inv(self.H), np.mod(-self.theta, 2 * math.pi),
+                                self.match_pair, self.xy1, self.xy0, self.scale1, self.scale0, self.scores)
 
 
 class _BlockSide:
@@ -277,11 +284,17 @@ def block_planes_to_original(bpm: BlockPairMatches, blocks0: list[Block], blocks
     f0, f1 = (np.sqrt(np.abs(s[:, 0, 0] * s[:, 1, 1] - s[:, 0, 1] * s[:, 1, 0]))[pair] for s in (s0, s1))
     table = MatchTable(xy0, xy1, angle0, bpm.theta[pair], bpm.scale0 / f0, bpm.scale1 / f1,
                        np.ones(len(pair)), pair, bpm.scores)
+    return table, h, plane_sides(h, xy0, pair)
+
+
+def plane_sides(h: np.ndarray, xy0: np.ndarray, plane_of: np.ndarray) -> np.ndarray:
+    """(L,) the side of each plane (+1 or -1): the sign that most of its (M, 2) image-0 matches ``xy0``
+    (``plane_of``: (M,) their plane) get as the projective depth of the (L, 3, 3) homographies ``h``."""
     side = np.ones(len(h))
     for plane in range(len(h)):  # one small projection per plane
-        _, w = project(h[plane], xy0[pair == plane])
+        _, w = project(h[plane], xy0[plane_of == plane])
         side[plane] = 1.0 if np.sum(np.sign(w)) >= 0 else -1.0
-    return table, h, side
+    return side
 
 
 @dataclass
@@ -304,15 +317,23 @@ class BlockPlanes:
     side: np.ndarray
     counts: dict[str, int]
 
-    def joined(self, other: BlockPlanes, block_offset: int) -> BlockPlanes:
-        """These planes followed by ``other``'s (found with image-0 blocks numbered from ``block_offset``, e.g.
-        a simulated view's), in one deduplicated match table; the counts add up."""
+    def joined(self, other: BlockPlanes, offset0: int, offset1: int = 0) -> BlockPlanes:
+        """These planes followed by ``other``'s (found with blocks numbered from ``offset0`` in image 0 and
+        ``offset1`` in image 1, e.g. a simulated view's), in one deduplicated match table; the counts add up."""
         raw = MatchTable.concatenate([self.raw, replace(other.raw, source=other.raw.source + len(self.H))])
         table, _ = deduplicate(raw)
         counts = {k: self.counts.get(k, 0) + other.counts.get(k, 0) for k in {*self.counts, *other.counts}}
         counts.update(block_matches=len(raw), block_matches_unique=len(table))
-        return BlockPlanes(self.level_matches.joined(other.level_matches, block_offset), raw, table,
+        return BlockPlanes(self.level_matches.joined(other.level_matches, offset0, offset1), raw, table,
                            np.concatenate([self.H, other.H]), np.concatenate([self.side, other.side]), counts)
+
+    def swapped(self) -> BlockPlanes:
+        """The same planes with the two images' roles exchanged: homographies inverted, each match's image 1
+        keypoint first."""
+        raw = self.raw.swapped()
+        h = np.linalg.inv(self.H)
+        return BlockPlanes(self.level_matches.swapped(), raw, self.table.swapped(), h,
+                           plane_sides(h, raw.xy0, raw.source), dict(self.counts))
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The planes and the match table, for ``--save-stages``."""

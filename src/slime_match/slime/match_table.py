@@ -63,6 +63,11 @@ class MatchTable:
         """The rows of ``tables``, one after another."""
         return cls(*(np.concatenate([getattr(t, f.name) for t in tables]) for f in fields(cls)))
 
+    def swapped(self) -> MatchTable:
+        """The same matches with the two images' roles exchanged (image 1's keypoints first)."""
+        return MatchTable(self.xy1, self.xy0, self.angle1, self.angle0, self.scale1, self.scale0, self.weight,
+                          self.source, self.score)
+
     @property
     def rho(self) -> np.ndarray:
         """(M,) relative orientations theta' - theta wrapped to (-pi, pi]."""

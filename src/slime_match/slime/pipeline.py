@@ -4,7 +4,7 @@ its own, with its counts.
 Stages and where they live:
     3.1 blocks and tiles ............ :mod:`.blocks`; their features: :mod:`.levels` (:mod:`.level_cache`)
     3.2-3.3 block planes ............ :mod:`.block_planes` (:mod:`.fixed_descriptors`, :mod:`.jobs`)
-    simulated views (ours) .......... :mod:`.view_planes` (their planes join the block planes)
+    simulated views (ours) .......... :mod:`.view_step`, :mod:`.view_planes` (their planes join the block planes)
     3.4 expansion and pruning ....... :mod:`.expansion`
     3.5 tile sets ................... :mod:`.tile_sets`
     3.6 the epipolar vote ........... :mod:`.epipolar_vote`
@@ -28,7 +28,7 @@ from ..errors import ConfigError
 from ..geometry.frames import Frame, homographies_to_original
 from ..geometry.ransac import HomographyRansacConfig
 from ..pipelines import BasePipeline
-from ..views import ViewConfig, ViewRecord
+from ..views import ViewConfig
 from .block_planes import BLOCK_MATCHINGS, BlockPlanes, block_planes
 from .blocks import Block, BlockConfig, make_blocks, make_tiles
 from .diagnostics import empty_result_reason, layout_warning, tile_count_warning
@@ -39,8 +39,9 @@ from .level_cache import LevelCache, feature_levels
 from .levels import DETECTIONS, LevelRequest
 from .refine import TILE_TESTS, FlowGuide, PlaneGuide, TileMatches, final_matches, match_tiles, tile_test
 from .selection import PlaneSelection, select_planes
-from .tile_sets import TileConfig, TileSets
-from .view_planes import view_planes
+from .tile_sets import TileConfig
+from .view_planes import ViewPlanes, view_planes
+from .view_step import PlaneState, add_views
 
 logger = logging.getLogger("slime_match")
 
@@ -170,9 +171,9 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     Args:
         level_cache: block and tile features of images met before (with this pipeline and ``config``), read
             and filled by the features stage; None computes them all.
-        views: simulated views of image 0 (:class:`~slime_match.views.ViewConfig`); None: off. Their planes
-            join the block planes before Sec. 3.4; "auto" adds them, one tilt after another, only while the
-            plane selection finds too little consistent geometry.
+        views: simulated views (:class:`~slime_match.views.ViewConfig`); None: off. Their planes join the
+            block planes before Sec. 3.4 (:mod:`.view_step`: "auto" adds them, one (image, tilt) after another,
+            only while the plane selection finds too little consistent geometry).
 
     Returns:
         SlimeOutput with matches in original pixels sorted by score (lower is better).
@@ -206,45 +207,30 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
             requests += [LevelRequest(image, tiles, regions_only=True, detection=config.tile_detection)
                          for image, tiles in ((image0, layout.tiles0), (image1, layout.tiles1))]
         features = feature_levels(pipeline, requests, workers, level_cache)
-    fixed = FixedDescriptors(pipeline, config.bins, workers)  # image 1's serve the plain blocks and the views
+    fixed = FixedDescriptors(pipeline, config.bins, workers)  # shared by the plain blocks and the views
     matching = config.block_matching or pipeline.slime_block_matching
     with timer("block_pairs"), torch_threads(1):
         planes = block_planes(pipeline, *features.levels[:2], layout.blocks0, layout.blocks1, config.ransac,
                               bins=config.bins, min_matches=config.min_plane_matches, seed=seed, workers=workers,
                               fixed=fixed, matching=matching)
-    expansion, selection = _select(planes, layout, config, workers, timer)
-    record = ViewRecord(views.mode)
-    blocks0 = list(layout.blocks0)  # and the views' blocks, when views are added
+    images = image0, image1
+
+    def find(image: int, tilt: float) -> ViewPlanes:
+        with timer("views"), torch_threads(1):
+            found = view_planes(pipeline, images[image], image, tilt, features.levels[1 - image],
+                                (layout.blocks0, layout.blocks1)[1 - image], config.blocks, config.ransac, detection,
+                                config.bins, config.min_plane_matches, seed, workers, level_cache, fixed, matching)
+        logger.info("Views of image %d at tilt %g: %d views, %d planes", image, tilt, found.views, len(found.planes.H))
+        return found
+
+    def select(found: BlockPlanes) -> tuple[Expansion, PlaneSelection]:
+        return _select(found, layout, config, workers, timer)
+
+    plain = PlaneState(planes, *select(planes), list(layout.blocks0), list(layout.blocks1))
+    state, record = add_views(plain, views, find, select)
     if views.mode != "off":
-        plain = planes, expansion, selection
-        sources: list[tuple[float, int, int, int]] = []  # per tilt: views, its planes' index range
-        for tilt in views.tilts:
-            if views.mode == "auto":
-                found_enough, record.reason = _geometry_support(selection, views)
-                if found_enough:
-                    break
-            with timer("views"), torch_threads(1):
-                found = view_planes(pipeline, image0, tilt, features.levels[1], layout.blocks1, config.blocks,
-                                    config.ransac, detection, config.bins, config.min_plane_matches, seed, workers,
-                                    level_cache, fixed, matching)
-            sources.append((tilt, found.views, len(planes.H), len(planes.H) + len(found.planes.H)))
-            planes = planes.joined(found.planes, len(blocks0))
-            blocks0 += found.blocks
-            record.tilts.append(tilt)
-            record.views += found.views
-            logger.info("Views of tilt %g: %d views, %d planes", tilt, found.views, len(found.planes.H))
-            expansion, selection = _select(planes, layout, config, workers, timer)
-        else:
-            found_enough, record.reason = _geometry_support(selection, views)
-            if views.mode != "auto":
-                record.reason = "every tilt tried"
-            elif not found_enough:  # the views found no stronger geometry either: their planes only compete
-                planes, expansion, selection = plain
-                record.reason = f"every tilt tried, and still {record.reason}: the planes of the image alone are kept"
-        record.found = [{"tilt": tilt, "views": count, "planes": stop - start,
-                         **_views_in_ftheta(selection.ftheta, planes.level_matches.pairs[:, 0], blocks0, start, stop)}
-                        for tilt, count, start, stop in sources]
         logger.info("Views: %s", record.reason)
+    planes, expansion, selection = state.planes, state.expansion, state.selection
     logger.info("Epipolar vote (Sec. 3.6): %s", selection.vote_reason)
     table = planes.table
     ftheta = selection.ftheta
@@ -272,7 +258,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     stages = None
     if config.keep_stages:
         stages = {name: array for result in (layout, *results[1:]) for name, array in result.arrays().items()}
-        stages.update(_plane_blocks0(planes.level_matches.pairs[:, 0], blocks0))
+        for image, blocks in enumerate((state.blocks0, state.blocks1)):
+            stages.update(_plane_blocks(planes.level_matches.pairs[:, image], blocks, image))
     counts["views"] = record.views
     decisions = {"vote": selection.vote, "vote_reason": selection.vote_reason, "views": record.as_dict(),
                  "detection": detection, "block_matching": matching}
@@ -292,25 +279,6 @@ def _select(planes: BlockPlanes, layout: Layout, config: SlimeConfig, workers: i
     return expansion, selection
 
 
-def _views_in_ftheta(ftheta: TileSets, block0_of_plane: np.ndarray, blocks0: list[Block], start: int, stop: int
-                     ) -> dict:
-    """The distinct F^theta matches on the planes ``start <= l < stop`` (one tilt's views; none when those planes
-    were dropped): ``ftheta_matches`` in all, ``ftheta_by_angle`` per view angle (degrees) that holds some."""
-    ours = np.flatnonzero((ftheta.plane >= start) & (ftheta.plane < stop))
-    angles = np.array([blocks0[block0_of_plane[plane]].view.angle for plane in ftheta.plane[ours]])
-    by_angle = {f"{angle:g}": int(ftheta.subset(ours[angles == angle]).union().sum()) for angle in np.unique(angles)}
-    return {"ftheta_matches": int(ftheta.subset(ours).union().sum()), "ftheta_by_angle": by_angle}
-
-
-def _geometry_support(selection: PlaneSelection, views: ViewConfig) -> tuple[bool, str]:
-    """Whether the run has enough geometry to need no more views (F^theta holds ``views.min_support``
-    matches), and the count in words."""
-    support = int(selection.ftheta.union().sum())
-    enough = support >= views.min_support
-    return enough, (f"{'enough' if enough else 'too few'} matches consistent with the planes' epipolar geometry "
-                    f"(F^theta): {support} {'>=' if enough else '<'} {views.min_support}")
-
-
 def _workers(requested: int | None) -> int:
     """Worker processes for Slime's stages: ``requested``, or one per CPU this process may use
     (``available_cpus``). On CUDA they run only CPU work: the networks stay in one process (see
@@ -318,17 +286,17 @@ def _workers(requested: int | None) -> int:
     return max(1, requested) if requested is not None else available_cpus()
 
 
-def _plane_blocks0(block0_of_plane: np.ndarray, blocks0: list[Block]) -> dict[str, np.ndarray]:
-    """Each plane's image-0 block for ``--save-stages``: ``planes_corners0`` (L, 4, 2) its core's corners in
-    original px (a simulated view's block is a turned, stretched quadrilateral there) and ``planes_view``
-    (L, 2) the tilt and angle in degrees of its view (1, 0: the image itself)."""
-    corners, views = np.zeros((len(block0_of_plane), 4, 2)), np.tile([1.0, 0.0], (len(block0_of_plane), 1))
-    for plane, w in enumerate(block0_of_plane):
-        block = blocks0[w]
+def _plane_blocks(block_of_plane: np.ndarray, blocks: list[Block], image: int) -> dict[str, np.ndarray]:
+    """Each plane's block in image ``image`` for ``--save-stages``: ``planes_corners<image>`` (L, 4, 2) its core's
+    corners in original px (a simulated view's block is a turned, stretched quadrilateral there) and
+    ``planes_view<image>`` (L, 2) the tilt and angle in degrees of its view (1, 0: the image itself)."""
+    corners, views = np.zeros((len(block_of_plane), 4, 2)), np.tile([1.0, 0.0], (len(block_of_plane), 1))
+    for plane, w in enumerate(block_of_plane):
+        block = blocks[w]
         corners[plane] = _core_corners(block)
         if block.view is not None:
             views[plane] = block.view.tilt, block.view.angle
-    return {"planes_corners0": corners, "planes_view": views}
+    return {f"planes_corners{image}": corners, f"planes_view{image}": views}
 
 
 def _boxes_original(blocks: list[Block]) -> np.ndarray:
@@ -363,6 +331,7 @@ def stages_to_original(stages: dict[str, np.ndarray], frame0: Frame, frame1: Fra
             boxes[:, 0:2], boxes[:, 2:4] = np.minimum(corner, other), np.maximum(corner, other)  # a turn swaps them
             out[key] = boxes
     out["planes_H"] = homographies_to_original(stages["planes_H"], frame0, frame1)
-    corners = stages["planes_corners0"]
-    out["planes_corners0"] = frame0.to_original(corners.reshape(-1, 2)).reshape(corners.shape)
+    for image, frame in ((0, frame0), (1, frame1)):
+        corners = stages[f"planes_corners{image}"]
+        out[f"planes_corners{image}"] = frame.to_original(corners.reshape(-1, 2)).reshape(corners.shape)
     return out

@@ -47,9 +47,42 @@ def matches_payload(folder: Path) -> dict[str, Any]:
         "method": summary.get("method"),
         "image_sizes": summary.get("image_sizes"),
         "warnings": summary.get("warnings", []),
+        "decisions": decision_lines(summary.get("decisions", {})),
         "has_stages": (folder / "stages.npz").is_file(),
     }
     return payload
+
+
+def decision_lines(decisions: dict[str, Any]) -> list[str]:
+    """``summary.json``'s ``decisions`` in words, one line each: the method ``auto`` took, the quarter turn,
+    the simulated views (the decision and why, then each step tried), Slime's epipolar vote, its block detection
+    and matching, and the frame of its final DTM."""
+    lines = []
+    if "method" in decisions:
+        lines.append(f"method: {decisions['method']}")
+    if "quarter_turns" in decisions:
+        lines.append(f"quarter turns: {decisions['quarter_turns']['reason']}")
+    views = decisions.get("views")
+    if views:
+        lines.append(f"simulated views ({views['mode']}, of {_VIEWED[views.get('images', 'image0')]}): "
+                     f"{views.get('decision', '')}{': ' if views.get('decision') else ''}{views['reason']}")
+        for step in views.get("tried", []):
+            line = f"  image {step['image']}, tilt {step['tilt']:g}: {step['views']} views"
+            if "planes" in step:
+                angles = ", ".join(f"{count} at {angle} deg" for angle, count in step["ftheta_by_angle"].items())
+                line += (f", {step['planes']} planes, {step['ftheta_matches']} matches kept in F^theta"
+                         + (f" ({angles})" if angles else ""))
+            lines.append(line)
+    if "vote" in decisions:
+        lines.append(f"epipolar vote: {decisions['vote']} ({decisions['vote_reason']})")
+    if "detection" in decisions:
+        lines.append(f"blocks: {decisions['detection']} detection, matched by {decisions['block_matching']}")
+    if "global_dtm" in decisions:
+        lines.append(f"final DTM: {decisions['global_dtm']}")
+    return lines
+
+
+_VIEWED = {"image0": "image 0", "image1": "image 1", "both": "both images"}
 
 
 def _boxes(boxes: np.ndarray) -> list[list[float]]:
@@ -72,8 +105,8 @@ def _sets(data: dict[str, np.ndarray], name: str) -> dict[str, Any]:
 def stages_payload(folder: Path) -> dict[str, Any]:
     """Slime's stages of a pair folder (``stages.npz``, with the counts and seconds of ``summary.json``) as
     layers: boxes (blocks, tiles) or labelled matches (the others); ``planes`` also holds each plane's
-    homography and block pair, and where the stages have them its image-0 block's corners and the (tilt,
-    angle) of the simulated view that block belongs to, for the viewer's hover."""
+    homography and block pair, and where the stages have them its blocks' corners in each image and the (tilt,
+    angle) of the simulated view each block belongs to, for the viewer's hover."""
     data = load_npz(folder / "stages.npz", "stages file", ("blocks0", "blocks1", "tiles0", "tiles1"),
                     hint="; it is written by a Slime match with stages kept")
     layers: dict[str, Any] = {}
@@ -84,9 +117,12 @@ def stages_payload(folder: Path) -> dict[str, Any]:
                             "label": np.asarray(data["block_matches_plane"]).astype(int).tolist(),
                             "H": np.asarray(data["planes_H"], np.float64).tolist(),
                             "block_pairs": np.asarray(data["planes_pairs"]).astype(int).tolist()}
-        if "planes_corners0" in data and "planes_view" in data:  # image 0's block: its outline, its view
-            layers["planes"]["corners0"] = np.round(np.asarray(data["planes_corners0"], np.float64), 2).tolist()
-            layers["planes"]["views"] = np.asarray(data["planes_view"], np.float64).tolist()
+        for image in (0, 1):  # each image's block: its outline, its view (stages of earlier versions: image 0's)
+            view = data.get(f"planes_view{image}", data.get("planes_view") if image == 0 else None)
+            if f"planes_corners{image}" in data and view is not None:
+                corners = np.round(np.asarray(data[f"planes_corners{image}"], np.float64), 2).tolist()
+                layers["planes"][f"corners{image}"] = corners
+                layers["planes"][f"views{image}"] = np.asarray(view, np.float64).tolist()
     for name in ("superset", "fbar", "ftheta"):
         if f"{name}_indptr" in data and "table_xy0" in data:
             layers[name] = _sets(data, name)

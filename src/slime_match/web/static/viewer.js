@@ -50,13 +50,15 @@ function paintLayers(ctx, v) {
       paintPairs(ctx, v, layer.xy0, layer.xy1, () => "#d4d4d8", { noLines: true, size: 2 });
       paintPairs(ctx, v, ks.map((k) => layer.xy0[k]), ks.map((k) => layer.xy1[k]),
         () => PALETTE[p % PALETTE.length], { size: 5, lineWidth: 1.5, alpha: 0.9, all: true });
-      // the block pair of a plane (image 0's block as its outline: a simulated view's is turned and
-      // stretched), the tile pair of a set
+      // the block pair of a plane (each block as its outline: a simulated view's is turned and stretched),
+      // the tile pair of a set
       const pair = name === "planes" ? layer.block_pairs[p] : (layer.set_tiles || [])[p];
       const boxes = name === "planes" ? L.blocks : L.tiles;
-      if (name === "planes" && layer.corners0) paintPolygon(ctx, v, 0, layer.corners0[p], "#fef08a");
-      else if (pair && boxes && boxes.boxes0[pair[0]]) paintBoxes(ctx, v, 0, [boxes.boxes0[pair[0]]], () => "#fef08a", 3);
-      if (pair && boxes && boxes.boxes1[pair[1]]) paintBoxes(ctx, v, 1, [boxes.boxes1[pair[1]]], () => "#fef08a", 3);
+      for (const i of [0, 1]) {
+        const corners = name === "planes" ? layer[`corners${i}`] : null;
+        if (corners) paintPolygon(ctx, v, i, corners[p], "#fef08a");
+        else if (pair && boxes && boxes[`boxes${i}`][pair[i]]) paintBoxes(ctx, v, i, [boxes[`boxes${i}`][pair[i]]], () => "#fef08a", 3);
+      }
     } else if (layer.label) {
       paintPairs(ctx, v, layer.xy0, layer.xy1, (k) => PALETTE[layer.label[k] % PALETTE.length]);
     } else {
@@ -170,6 +172,15 @@ function showMatches(m, source, filesUrl) {
     li.textContent = text;
     $("warnings-list").append(li);
   }
+  const decisions = m.decisions || [];  // the adaptive steps' choices and why (views tried, vote, DTM frame)
+  $("decisions").hidden = !decisions.length;
+  $("decisions-list").innerHTML = "";
+  for (const text of decisions) {
+    const li = document.createElement("li");
+    li.textContent = text.trim();
+    if (text.startsWith("  ")) li.className = "sub";
+    $("decisions-list").append(li);
+  }
   renderInfo(`${m.count} matches: click a keypoint to see its match`);
   renderStageTable();
   view.redraw();
@@ -268,9 +279,10 @@ const matchHandler = {
       const plane = name === "planes" ? label : (layer.set_plane || [])[label];
       const H = L.planes && plane !== undefined ? L.planes.H[plane] : null;
       const matrix = H ? H.map((r) => r.map((v) => v.toPrecision(5).padStart(12)).join(" ")).join("\n") : "";
-      const view = name === "planes" && layer.views ? layer.views[label] : null;
-      const where = name === "planes" ? `block pair ${layer.block_pairs[label].join(" / ")}`
-        + (view && view[0] > 1 ? ` (image 0's block in its simulated view of tilt ${+view[0].toFixed(2)} at ${+view[1].toFixed(1)} deg)` : "")
+      const viewed = [0, 1].map((i) => (name === "planes" && layer[`views${i}`] ? layer[`views${i}`][label] : null))
+        .map((view, i) => (view && view[0] > 1
+          ? ` (image ${i}'s block in its simulated view of tilt ${+view[0].toFixed(2)} at ${+view[1].toFixed(1)} deg)` : ""));
+      const where = name === "planes" ? `block pair ${layer.block_pairs[label].join(" / ")}` + viewed.join("")
         : `set ${label} of ${name}, tile pair ${(layer.set_tiles || [])[label]}`;
       renderInfo(`plane ${plane}: ${count} matches, ${where}` + (H ? `, H (image 0 -> 1):\n${matrix}` : ""));
     }
