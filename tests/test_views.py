@@ -182,10 +182,12 @@ def test_joined_block_planes_keep_each_planes_matches_and_add_the_counts():
     first, second = planes(2, 0.0, 4), planes(3, 1000.0, 5)
     second.raw.xy0[0] = first.raw.xy0[0]  # one exact duplicate across the two: merged in the table
     second.raw.xy1[0] = first.raw.xy1[0]
-    joined = first.joined(second, block_offset=4)
+    joined = first.joined(second, 4)
     assert len(joined.H) == 5 and len(joined.side) == 5
     np.testing.assert_array_equal(joined.raw.source, [0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4])
-    np.testing.assert_array_equal(joined.level_matches.pairs[:, 0], [0, 1, 4, 5, 6])
+    np.testing.assert_array_equal(joined.level_matches.pairs, [[0, 0], [1, 0], [4, 0], [5, 0], [6, 0]])
+    in_image_1 = first.joined(second, 0, 7)  # a simulated view of image 1: its blocks numbered after image 1's
+    np.testing.assert_array_equal(in_image_1.level_matches.pairs, [[0, 0], [1, 0], [0, 7], [1, 7], [2, 7]])
     np.testing.assert_array_equal(joined.level_matches.match_pair[6:], [2, 2, 2, 3, 3, 3, 4, 4, 4])
     assert len(joined.table) == 14 and joined.table.weight.sum() == 15
     assert joined.counts == {"block_pairs": 50, "block_planes": 5, "block_matches": 15, "block_matches_unique": 14}
