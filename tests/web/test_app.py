@@ -291,8 +291,8 @@ def test_the_decisions_of_a_run_read_as_lines():
                             "global_dtm": "image 0's own frame"})
     assert lines == [
         "method: slime-aliked (its weights are cached)",
-        "simulated views (auto, of both images): kept: enough matches consistent with the planes' epipolar "
-        "geometry (F^theta): 140 >= 100",
+        ("simulated views (auto, of both images): kept: enough matches consistent with the planes' epipolar "
+         "geometry (F^theta): 140 >= 100"),
         "  image 0, tilt 2: 5 views, 3 planes, 0 matches kept in F^theta",
         "  image 1, tilt 2: 5 views, 9 planes, 140 matches kept in F^theta (100 at 0 deg, 40 at 36 deg)",
         "epipolar vote: consensus (3 homographies share F)",
