@@ -6,7 +6,7 @@
 #
 #   benchmarks/run_results.sh [extra slime-bench options, e.g. --device cuda]
 #
-# About 90 minutes on 2 CPU cores (15 hard pairs and 46 planar and non-planar pairs; the Slime presets take
+# About 75 minutes on 2 CPU cores (15 hard pairs and 46 planar and non-planar pairs; the Slime presets take
 # 10-40 s a pair and up to 110 s where simulated views are tried); run it on a quiet machine, as the report
 # gives seconds per pair. Resumable: predictions are cached in $OUT/predictions and $OUT_HARD/predictions
 # with the code version that computed them, so an interrupted run continues where it stopped and a rerun
