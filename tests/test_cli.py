@@ -132,9 +132,10 @@ def test_views_option(pair, tmp_path, capsys):
     assert code == 0, err
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["config"]["views"]["mode"] == "always" and summary["config"]["views"]["tilts"] == [2.0]
-    assert summary["decisions"]["views"] == {"mode": "always", "images": "image0", "tilts": [2.0], "views": 5,
+    assert summary["decisions"]["views"] == {"mode": "always", "images": "both", "tilts": [2.0], "views": 10,
                                              "decision": "kept", "reason": "every view tried",
-                                             "tried": [{"image": 0, "tilt": 2.0, "views": 5}]}
+                                             "tried": [{"image": 0, "tilt": 2.0, "views": 5},
+                                                       {"image": 1, "tilt": 2.0, "views": 5}]}
     with pytest.raises(SystemExit):
         main(["match", *pair, "-o", str(tmp_path / "r"), "--views", "sometimes"])
     assert "--views" in capsys.readouterr().err and not (tmp_path / "r").exists()

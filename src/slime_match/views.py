@@ -40,8 +40,9 @@ class ViewConfig:
         mode: "auto" (views only when the plain run finds too little consistent geometry, one (image, tilt)
             after another until it does), "always" (every tilt of every image asked for), "off".
         tilts: the tilts tried, in order (each with the rotations ``views_of_tilt`` gives it).
-        images: whose views: "image0" (default), "image1", or "both" (per tilt image 0's views, then image
-            1's, as ASIFT simulates both images).
+        images: whose views: "both" (default, as ASIFT simulates both images: Slime keeps each image's
+            views a branch of its own and keeps the stronger, ``slime.view_step``; a base alone pools the
+            matches of both), "image0" or "image1".
         min_support: Slime's "auto" adds views while F^theta (the planes the epipolar vote kept, Secs.
             3.6-3.7) holds fewer matches than this; when no view reaches it, the views' planes are dropped
             and the images' own planes decide (views that find no stronger geometry only compete with them).
@@ -52,7 +53,7 @@ class ViewConfig:
 
     mode: str = "auto"
     tilts: tuple[float, ...] = (2.0, 4.0)
-    images: str = "image0"
+    images: str = "both"
     min_support: int = 100
     min_inliers: int = 50
 
@@ -69,10 +70,15 @@ class ViewConfig:
             raise ConfigError(f"views.tilts must all be > 1 (1 is the image itself), got {self.tilts}")
         return self
 
+    @property
+    def viewed(self) -> tuple[int, ...]:
+        """The images whose views are simulated (0, 1 or both), image 0 first."""
+        return {"image0": (0,), "image1": (1,), "both": (0, 1)}[self.images]
+
     def schedule(self) -> list[tuple[int, float]]:
-        """The (image, tilt) steps in the order they are tried: per tilt, image 0's views before image 1's."""
-        images = {"image0": (0,), "image1": (1,), "both": (0, 1)}[self.images]
-        return [(image, tilt) for tilt in self.tilts for image in images]
+        """Every (image, tilt) step in the order a base pipeline alone tries them: per tilt, image 0's views
+        before image 1's."""
+        return [(image, tilt) for tilt in self.tilts for image in self.viewed]
 
 
 @dataclass(frozen=True)
@@ -167,21 +173,24 @@ def views_of_tilt(tilt: float) -> list[float]:
 @dataclass
 class ViewTry:
     """One (image, tilt) step of the views: its ``views`` of ``image`` (0 or 1) at ``tilt`` and, for Slime,
-    the block ``planes`` they found, the matches of F^theta on those planes (``ftheta_matches``; 0 when the
-    views' planes were dropped) and, per view angle in degrees whose planes hold some, how many
-    (``ftheta_by_angle``)."""
+    the block ``planes`` they found, the matches of F^theta of the image's branch once they joined it
+    (``support``: the plain planes and this image's views so far), the final F^theta's matches on this step's
+    planes (``ftheta_matches``; 0 when they were not kept) and, per view angle in degrees whose planes hold
+    some, how many (``ftheta_by_angle``)."""
 
     image: int
     tilt: float
     views: int
     planes: int | None = None
+    support: int | None = None
     ftheta_matches: int | None = None
     ftheta_by_angle: dict[str, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         out = {"image": self.image, "tilt": self.tilt, "views": self.views}
         if self.planes is not None:
-            out.update(planes=self.planes, ftheta_matches=self.ftheta_matches, ftheta_by_angle=self.ftheta_by_angle)
+            out.update(planes=self.planes, support=self.support, ftheta_matches=self.ftheta_matches,
+                       ftheta_by_angle=self.ftheta_by_angle)
         return out
 
 
@@ -199,7 +208,7 @@ class ViewRecord:
     """
 
     mode: str
-    images: str = "image0"
+    images: str = "both"
     tried: list[ViewTry] = field(default_factory=list)
     decision: str = "off"
     reason: str = "views off"

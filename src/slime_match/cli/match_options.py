@@ -86,10 +86,10 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
                                 "checks which quarter turn of image 1 the matches agree with most and matches it "
                                 "turned when one is the clear winner; 'off': never")
     everyday.add_argument("--views", default=None, choices=VIEW_MODES,
-                          help="simulated views for extreme viewpoints (ASIFT tilts 2 then 4 of image 0; "
-                               "--set views.images=image1|both for the other image or both; for Slime and a base "
-                               "pipeline alone): 'auto' (default) only when the plain run finds too little "
-                               "consistent geometry, 'always', 'off'; summary.json records the views tried")
+                          help="simulated views for extreme viewpoints (ASIFT tilts 2 then 4 of both images; "
+                               "--set views.images=image0|image1 for one; for Slime and a base pipeline alone): "
+                               "'auto' (default) only when the plain run finds too little consistent geometry, "
+                               "'always', 'off'; summary.json records the views tried")
     internals.add_argument("--set", dest="settings", action="append", default=[], type=parse_setting,
                            metavar="OPTION=VALUE",
                            help="any option by its dotted path, e.g. slime.tiles.t_xi=12 or base.blob.shortlist_k=5 "

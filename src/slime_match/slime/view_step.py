@@ -6,11 +6,18 @@ returns the state to continue from, with a :class:`~slime_match.views.ViewRecord
 stopped. The policy, by ``ViewConfig.mode``:
 
 - "off": no view; the plain state.
-- "always": every (image, tilt) of ``ViewConfig.schedule``; the state with all their planes.
-- "auto": before each (image, tilt), stop when F^theta (the planes the epipolar vote kept, Secs. 3.6-3.7)
-  holds ``min_support`` matches; after the last one, keep the views' planes only if F^theta has reached it,
-  else go back to the plain state (views that found no stronger geometry would only compete with the images'
-  own planes).
+- "always": every tilt of every viewed image; the image whose branch gives F^theta (the planes the epipolar
+  vote kept, Secs. 3.6-3.7) the most matches is kept.
+- "auto": nothing when the plain F^theta holds ``min_support`` matches. Else the first tilt of every viewed
+  image, each image's views joining that image's own branch of the plain state; the branch whose F^theta
+  holds the most matches leads, and it is kept once it holds ``min_support``; until then the next tilt
+  continues the leading branch only. When no branch reaches it, the plain state is kept (views that found no
+  stronger geometry would only compete with the images' own planes).
+
+Why branches: a scene's tilt is undone by compressing one image or the other, so the two images' view planes
+are never pooled (the wrong image's views would only add planes that compete with the right one's in the
+vote), and the images are compared at the same tilt rather than the first to reach the support winning: the
+views that compress the wrong image move further from the other image and gain less consistent geometry.
 """
 
 from __future__ import annotations
@@ -53,6 +60,11 @@ class PlaneState:
         return PlaneState(planes, *select(planes), blocks0, blocks1)
 
 
+def _support(state: PlaneState) -> int:
+    """The distinct matches of the state's F^theta."""
+    return int(state.selection.ftheta.union().sum())
+
+
 def geometry_support(selection: PlaneSelection, min_support: int) -> tuple[bool, str]:
     """Whether F^theta holds ``min_support`` matches (enough geometry: no more views), and the count in words."""
     support = int(selection.ftheta.union().sum())
@@ -67,40 +79,52 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
 
     Args:
         plain: the plain run's plane state.
-        views: the mode, the tilts and images (``ViewConfig.schedule``) and the support ``auto`` asks for.
+        views: the mode, the tilts, the viewed images and the support ``auto`` asks for.
         find: the planes of the views of (image, tilt) (``view_planes``).
         select: Secs. 3.4-3.7 on block planes (expansion, then the selection of F^theta).
 
     Returns:
-        The state to continue from and what was tried, decided and why.
+        The state to continue from (the plain one, or one image's branch) and what was tried, decided and why.
     """
     record = ViewRecord(views.mode, views.images)
     if views.mode == "off":
         return plain, record
-    state, ranges = plain, []
-    for image, tilt in views.schedule():
-        if views.mode == "auto":
-            enough, record.reason = geometry_support(state.selection, views.min_support)
-            if enough:
-                record.decision = "kept" if record.tried else "not needed"
-                break
-        found = find(image, tilt)
-        ranges.append((len(state.planes.H), len(state.planes.H) + len(found.planes.H)))
-        state = state.with_views(found, select)
-        record.tried.append(ViewTry(image, tilt, found.views, planes=len(found.planes.H)))
+    enough, record.reason = geometry_support(plain.selection, views.min_support)
+    if views.mode == "auto" and enough:
+        record.decision = "not needed"
+        return plain, record
+    branches: dict[int, PlaneState] = {}
+    ranges: dict[int, list[tuple[int, int]]] = {}  # per image: the plane ranges of its steps in its branch
+    leader = None
+    for n, tilt in enumerate(views.tilts):
+        for image in views.viewed if n == 0 or views.mode == "always" else (leader,):
+            state = branches.get(image, plain)
+            found = find(image, tilt)
+            ranges.setdefault(image, []).append((len(state.planes.H), len(state.planes.H) + len(found.planes.H)))
+            branches[image] = state = state.with_views(found, select)
+            record.tried.append(ViewTry(image, tilt, found.views, planes=len(found.planes.H),
+                                        support=_support(state)))
+        leader = max(branches, key=lambda i: (_support(branches[i]), -i))
+        enough, reason = geometry_support(branches[leader].selection, views.min_support)
+        if views.mode == "auto" and enough:
+            record.decision, record.reason = "kept", f"image {leader}'s views: {reason}"
+            break
     else:
-        enough, reason = geometry_support(state.selection, views.min_support)
-        record.decision = "kept"
-        if views.mode == "always":
-            record.reason = "every view tried"
-        elif enough:
-            record.reason = reason
+        if views.mode == "always" and leader is not None:
+            record.decision, record.reason = "kept", f"every view tried; image {leader}'s views hold the most: {reason}"
         else:
-            state, record.decision = plain, "dropped"
-            record.reason = f"every view tried, and still {reason}: the planes of the images alone are kept"
-    for step, (start, stop) in zip(record.tried, ranges):
-        step.ftheta_matches, step.ftheta_by_angle = _in_ftheta(state, step.image, start, stop)
-    return state, record
+            best = f"at best {_support(branches[leader])}" if leader is not None else "no view"
+            leader, record.decision = None, "dropped"
+            record.reason = (f"every view tried, and F^theta holds {best} < {views.min_support} matches: the "
+                             f"planes of the images alone are kept")
+    final = plain if leader is None else branches[leader]
+    steps = iter(ranges.get(leader, []))
+    for step in record.tried:
+        if step.image == leader:
+            step.ftheta_matches, step.ftheta_by_angle = _in_ftheta(final, leader, *next(steps))
+        else:
+            step.ftheta_matches = 0
+    return final, record
 
 
 def _in_ftheta(state: PlaneState, image: int, start: int, stop: int) -> tuple[int, dict[str, int]]:

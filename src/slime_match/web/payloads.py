@@ -70,8 +70,10 @@ def decision_lines(decisions: dict[str, Any]) -> list[str]:
             line = f"  image {step['image']}, tilt {step['tilt']:g}: {step['views']} views"
             if "planes" in step:
                 angles = ", ".join(f"{count} at {angle} deg" for angle, count in step["ftheta_by_angle"].items())
-                line += (f", {step['planes']} planes, {step['ftheta_matches']} matches kept in F^theta"
-                         + (f" ({angles})" if angles else ""))
+                line += f", {step['planes']} planes"
+                if "support" in step:  # F^theta of the image's branch once the step joined it
+                    line += f", F^theta with them {step['support']}"
+                line += f", {step['ftheta_matches']} matches kept in F^theta" + (f" ({angles})" if angles else "")
             lines.append(line)
     if "vote" in decisions:
         lines.append(f"epipolar vote: {decisions['vote']} ({decisions['vote_reason']})")

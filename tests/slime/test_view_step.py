@@ -1,0 +1,132 @@
+"""The views step's policy (slime.view_step.add_views) on stand-in plane states whose F^theta support is given:
+when views are tried, which image's branch is kept, and that the two images' views are never pooled."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+
+from slime_match.slime import view_step
+from slime_match.views import ViewConfig
+
+
+@dataclass
+class _Sets:
+    """F^theta with ``support`` distinct matches."""
+
+    support: int
+
+    def union(self) -> np.ndarray:
+        return np.ones(self.support, bool)
+
+
+@dataclass
+class _Selection:
+    ftheta: _Sets
+
+
+@dataclass
+class _Planes:
+    H: list
+
+
+@dataclass
+class _Found:
+    """The views of one (image, tilt): how many, their planes and the F^theta support they add to a branch."""
+
+    image: int
+    views: int
+    planes: _Planes
+    gain: int
+
+
+@dataclass
+class _State:
+    """A plane state: its F^theta support and the (image, tilt) steps whose planes it holds."""
+
+    support: int
+    steps: tuple = ()
+    planes: _Planes = field(default_factory=lambda: _Planes([0] * 10))
+
+    @property
+    def selection(self) -> _Selection:
+        return _Selection(_Sets(self.support))
+
+    def with_views(self, found: _Found, select) -> _State:
+        return _State(self.support + found.gain, self.steps + (found.image,),
+                      _Planes(self.planes.H + found.planes.H))
+
+
+@pytest.fixture(autouse=True)
+def _no_angles(monkeypatch):
+    """The stand-in states hold no tile sets: each kept step's F^theta count is its planes' count."""
+    monkeypatch.setattr(view_step, "_in_ftheta", lambda state, image, start, stop: (stop - start, {}))
+
+
+def _finder(gains: dict[tuple[int, float], int], calls: list):
+    def find(image: int, tilt: float) -> _Found:
+        calls.append((image, tilt))
+        return _Found(image, 5 if tilt == 2 else 10, _Planes([0] * 3), gains[image, tilt])
+    return find
+
+
+def _run(mode: str, images: str, plain: int, gains: dict[tuple[int, float], int]):
+    calls = []
+    state, record = view_step.add_views(_State(plain), ViewConfig(mode=mode, images=images), _finder(gains, calls),
+                                        select=None)
+    return state, record, calls
+
+
+GAINS = {(0, 2.0): 20, (1, 2.0): 90, (0, 4.0): 30, (1, 4.0): 5}
+
+
+def test_enough_plain_geometry_needs_no_view():
+    state, record, calls = _run("auto", "both", 100, GAINS)
+    assert calls == [] and state.steps == () and record.decision == "not needed" and record.tried == []
+
+
+def test_off_tries_nothing():
+    state, record, calls = _run("off", "both", 0, GAINS)
+    assert calls == [] and state.steps == () and record.decision == "off"
+
+
+def test_auto_keeps_the_first_branch_that_reaches_the_support_and_never_pools_the_images():
+    state, record, calls = _run("auto", "both", 30, GAINS)  # image 1's tilt 2 reaches 30 + 90 >= 100
+    assert calls == [(0, 2.0), (1, 2.0)]
+    assert state.steps == (1,) and state.support == 120  # image 0's views are not in it
+    assert record.decision == "kept" and record.reason.startswith("image 1's views: enough")
+    assert [(t.image, t.support, t.ftheta_matches) for t in record.tried] == [(0, 50, 0), (1, 120, 3)]
+
+
+def test_a_branch_accumulates_its_own_tilts():
+    state, record, calls = _run("auto", "image0", 60, GAINS)  # image 0: 60 + 20 < 100, then + 30 >= 100
+    assert calls == [(0, 2.0), (0, 4.0)] and state.steps == (0, 0) and state.support == 110
+    assert record.decision == "kept" and [t.ftheta_matches for t in record.tried] == [3, 3]
+
+
+def test_the_images_are_compared_at_the_same_tilt_not_the_first_to_reach_the_support():
+    state, record, calls = _run("auto", "both", 90, GAINS)  # image 0: 110, image 1: 180, both >= 100
+    assert calls == [(0, 2.0), (1, 2.0)] and state.steps == (1,) and state.support == 180
+
+
+def test_later_tilts_continue_the_leading_branch_only():
+    gains = {(0, 2.0): 50, (1, 2.0): 40, (0, 4.0): 60, (1, 4.0): 500}
+    state, record, calls = _run("auto", "both", 0, gains)
+    assert calls == [(0, 2.0), (1, 2.0), (0, 4.0)] and state.steps == (0, 0) and state.support == 110
+    assert [(t.image, t.tilt, t.support, t.ftheta_matches) for t in record.tried] == [
+        (0, 2.0, 50, 3), (1, 2.0, 40, 0), (0, 4.0, 110, 3)]
+
+
+def test_auto_drops_the_views_when_no_branch_reaches_the_support():
+    state, record, calls = _run("auto", "both", 0, GAINS)  # image 1 leads at tilt 2 (90) and ends at 95
+    assert calls == [(0, 2.0), (1, 2.0), (1, 4.0)]
+    assert state.steps == () and state.support == 0 and record.decision == "dropped"
+    assert "at best 95 < 100" in record.reason and all(t.ftheta_matches == 0 for t in record.tried)
+
+
+def test_always_tries_every_step_and_keeps_the_strongest_branch():
+    state, record, calls = _run("always", "both", 100, GAINS)
+    assert calls == [(0, 2.0), (1, 2.0), (0, 4.0), (1, 4.0)] and state.steps == (1, 1) and state.support == 195
+    assert record.decision == "kept" and record.reason.startswith("every view tried; image 1's views hold the most")
