@@ -109,6 +109,7 @@ def test_a_branch_accumulates_its_own_tilts():
 def test_the_images_are_compared_at_the_same_tilt_not_the_first_to_reach_the_support():
     state, record, calls = _run("auto", "both", 90, GAINS)  # image 0: 110, image 1: 180, both >= 100
     assert calls == [(0, 2.0), (1, 2.0)] and state.steps == (1,) and state.support == 180
+    assert [t.support for t in record.tried] == [110, 180] and record.reason.startswith("image 1's views")
 
 
 def test_later_tilts_continue_the_leading_branch_only():
