@@ -9,7 +9,7 @@ image 0 undo a tilt that compresses image 1, views of image 1 one that compresse
 
 Where views are used: Slime's block stage (``slime.view_step``: each view is one more set of block levels)
 and a base pipeline alone (``pipelines.view_matching``). Both add them adaptively by default (:class:`ViewConfig`):
-only when the plain run finds too little consistent geometry, one (image, tilt) after another.
+only when the plain run finds too little consistent geometry, tilt after tilt.
 """
 
 from __future__ import annotations
@@ -37,8 +37,8 @@ class ViewConfig:
     """Simulated views (ASIFT tilts and rotations) and when to add them.
 
     Attributes:
-        mode: "auto" (views only when the plain run finds too little consistent geometry, one (image, tilt)
-            after another until it does), "always" (every tilt of every image asked for), "off".
+        mode: "auto" (views only when the plain run finds too little consistent geometry, tilt after tilt
+            until it does), "always" (every tilt of every image asked for), "off".
         tilts: the tilts tried, in order (each with the rotations ``views_of_tilt`` gives it).
         images: whose views: "both" (default, as ASIFT simulates both images: Slime keeps each image's
             views a branch of its own and keeps the stronger, ``slime.view_step``; a base alone pools the

@@ -172,8 +172,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         level_cache: block and tile features of images met before (with this pipeline and ``config``), read
             and filled by the features stage; None computes them all.
         views: simulated views (:class:`~slime_match.views.ViewConfig`); None: off. Their planes join the
-            block planes before Sec. 3.4 (:mod:`.view_step`: "auto" adds them, one (image, tilt) after another,
-            only while the plane selection finds too little consistent geometry).
+            block planes before Sec. 3.4 (:mod:`.view_step`: "auto" adds them, tilt after tilt and each image's
+            views a branch of its own, only while the plane selection finds too little consistent geometry).
 
     Returns:
         SlimeOutput with matches in original pixels sorted by score (lower is better).

@@ -1,5 +1,5 @@
 """The simulated views step of Slime (ours, between Secs. 3.3 and 3.4): more block planes from ASIFT views of
-either image, added one (image, tilt) at a time, and a stated policy for when to stop and what to keep.
+either image, added tilt after tilt, and a stated policy for when to stop and which image's views to keep.
 
 The step takes the plane state of the plain run (block planes, expansion, selection, both images' blocks) and
 returns the state to continue from, with a :class:`~slime_match.views.ViewRecord` of what it tried and why it
@@ -60,14 +60,19 @@ class PlaneState:
         return PlaneState(planes, *select(planes), blocks0, blocks1)
 
 
+def _selection_support(selection: PlaneSelection) -> int:
+    """The distinct matches of F^theta."""
+    return int(selection.ftheta.union().sum())
+
+
 def _support(state: PlaneState) -> int:
     """The distinct matches of the state's F^theta."""
-    return int(state.selection.ftheta.union().sum())
+    return _selection_support(state.selection)
 
 
 def geometry_support(selection: PlaneSelection, min_support: int) -> tuple[bool, str]:
     """Whether F^theta holds ``min_support`` matches (enough geometry: no more views), and the count in words."""
-    support = int(selection.ftheta.union().sum())
+    support = _selection_support(selection)
     enough = support >= min_support
     return enough, (f"{'enough' if enough else 'too few'} matches consistent with the planes' epipolar geometry "
                     f"(F^theta): {support} {'>=' if enough else '<'} {min_support}")
