@@ -60,19 +60,9 @@ class PlaneState:
         return PlaneState(planes, *select(planes), blocks0, blocks1)
 
 
-def _selection_support(selection: PlaneSelection) -> int:
-    """The distinct matches of F^theta."""
-    return int(selection.ftheta.union().sum())
-
-
-def _support(state: PlaneState) -> int:
-    """The distinct matches of the state's F^theta."""
-    return _selection_support(state.selection)
-
-
 def geometry_support(selection: PlaneSelection, min_support: int) -> tuple[bool, str]:
     """Whether F^theta holds ``min_support`` matches (enough geometry: no more views), and the count in words."""
-    support = _selection_support(selection)
+    support = int(selection.ftheta.union().sum())
     enough = support >= min_support
     return enough, (f"{'enough' if enough else 'too few'} matches consistent with the planes' epipolar geometry "
                     f"(F^theta): {support} {'>=' if enough else '<'} {min_support}")
@@ -99,6 +89,7 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
         record.decision = "not needed"
         return plain, record
     branches: dict[int, PlaneState] = {}
+    supports: dict[int, int] = {}  # per image: the distinct matches of its branch's F^theta
     ranges: dict[int, list[tuple[int, int]]] = {}  # per image: the plane ranges of its steps in its branch
     leader = None
     for n, tilt in enumerate(views.tilts):
@@ -107,9 +98,10 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
             found = find(image, tilt)
             ranges.setdefault(image, []).append((len(state.planes.H), len(state.planes.H) + len(found.planes.H)))
             branches[image] = state = state.with_views(found, select)
+            supports[image] = int(state.selection.ftheta.union().sum())
             record.tried.append(ViewTry(image, tilt, found.views, planes=len(found.planes.H),
-                                        support=_support(state)))
-        leader = max(branches, key=lambda i: (_support(branches[i]), -i))
+                                        support=supports[image]))
+        leader = max(supports, key=lambda i: (supports[i], -i))
         enough, reason = geometry_support(branches[leader].selection, views.min_support)
         if views.mode == "auto" and enough:
             record.decision, record.reason = "kept", f"image {leader}'s views: {reason}"
@@ -118,7 +110,7 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
         if views.mode == "always" and leader is not None:
             record.decision, record.reason = "kept", f"every view tried; image {leader}'s views hold the most: {reason}"
         else:
-            best = f"at best {_support(branches[leader])}" if leader is not None else "no view"
+            best = f"at best {supports[leader]}" if leader is not None else "no view"
             leader, record.decision = None, "dropped"
             record.reason = (f"every view tried, and F^theta holds {best} < {views.min_support} matches: the "
                              f"planes of the images alone are kept")
