@@ -4,8 +4,8 @@ The same rule as Slime's gates (:mod:`.test_slime_gates`): correct matches, cove
 of the measured value, precision stays within 3 points. A pair enters a method's gates where the method
 finds at least 40 correct matches there (fewer would let a handful of matches decide; RootSIFT finds 11-33
 on the ScanNet pairs), only pairs that a base matches without simulated views (those cost minutes; RootSIFT's
-on EVD adam, a few seconds, are the exception), and a
-planar pair of each kind (viewpoint, rotation) per method, to keep the default run short.
+on EVD adam, a few seconds, are the exception), and a planar pair of each kind (viewpoint, rotation) per
+method, to keep the default run short.
 
 Measured with ``python tests/quality/gates.py METHOD PAIR ...`` on a 2-core x86-64 CPU, METHOD as keyed below.
 """
