@@ -74,8 +74,8 @@ def _finder(gains: dict[tuple[int, float], int], calls: list):
 
 def _run(mode: str, images: str, plain: int, gains: dict[tuple[int, float], int]):
     calls = []
-    state, record = view_step.add_views(_State(plain), ViewConfig(mode=mode, images=images), _finder(gains, calls),
-                                        select=None)
+    state, record = view_step.add_views(_State(plain), ViewConfig(mode=mode, images=images, min_support=100),
+                                        _finder(gains, calls), select=None)
     return state, record, calls
 
 
@@ -112,12 +112,21 @@ def test_the_images_are_compared_at_the_same_tilt_not_the_first_to_reach_the_sup
     assert [t.support for t in record.tried] == [110, 180] and record.reason.startswith("image 1's views")
 
 
-def test_later_tilts_continue_the_leading_branch_only():
-    gains = {(0, 2.0): 50, (1, 2.0): 40, (0, 4.0): 60, (1, 4.0): 500}
-    state, record, calls = _run("auto", "both", 0, gains)
+@pytest.mark.parametrize("plain", [0, 30])
+def test_later_tilts_continue_the_leading_branch_only_when_its_views_added_more_than_twice(plain):
+    gains = {(0, 2.0): 50, (1, 2.0): 20, (0, 4.0): 60 - plain, (1, 4.0): 500}  # with 30: 80 against 50 in all
+    state, record, calls = _run("auto", "both", plain, gains)
     assert calls == [(0, 2.0), (1, 2.0), (0, 4.0)] and state.steps == (0, 0) and state.support == 110
     assert [(t.image, t.tilt, t.support, t.ftheta_matches) for t in record.tried] == [
-        (0, 2.0, 50, 3), (1, 2.0, 40, 0), (0, 4.0, 110, 3)]
+        (0, 2.0, plain + 50, 3), (1, 2.0, plain + 20, 0), (0, 4.0, 110, 3)]
+
+
+@pytest.mark.parametrize("gains", [{(0, 2.0): 50, (1, 2.0): 40, (0, 4.0): 60, (1, 4.0): 500},
+                                   {(0, 2.0): 0, (1, 2.0): 0, (0, 4.0): 60, (1, 4.0): 500}])
+def test_a_lead_within_a_factor_of_two_continues_both_branches(gains):
+    state, record, calls = _run("auto", "both", 0, gains)  # image 1 overtakes at tilt 4
+    assert calls == [(0, 2.0), (1, 2.0), (0, 4.0), (1, 4.0)] and state.steps == (1, 1)
+    assert record.decision == "kept" and record.reason.startswith("image 1's views")
 
 
 def test_auto_drops_the_views_when_no_branch_reaches_the_support():

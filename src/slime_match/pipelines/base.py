@@ -127,6 +127,9 @@ class BasePipeline:
         slime_block_matching: how Slime finds a block pair's first matches on this base by default
             (``SlimeConfig.block_matching``): "pairs" (each block pair, the paper's) or "levels" (each pair of
             block scales' whole images, for a matcher that reads the whole image).
+        slime_view_support: the matches F^theta (the planes Slime's epipolar vote keeps) must hold on this base
+            before simulated views stop being added (``ViewConfig.min_support`` when that is None): it scales
+            with how densely the base matches the same planes.
         options: the :class:`BaseConfig` fields this pipeline reads (``make_config`` refuses the others).
     """
 
@@ -134,6 +137,7 @@ class BasePipeline:
     slime_global_dtm: bool = True
     slime_detection: str = "scale"
     slime_block_matching: str = "pairs"
+    slime_view_support: int = 100
     options: frozenset[str] = frozenset()
 
     def __init__(self, config: BaseConfig, device: torch.device) -> None:

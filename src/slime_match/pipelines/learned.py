@@ -212,4 +212,7 @@ def learned_pipeline_class(name: str) -> type[LearnedPipeline]:
                                      "options": frozenset(options), "__module__": __name__,
                                      # LightGlue reads the whole image: Slime gives it whole block levels
                                      "slime_block_matching": "levels" if matcher == "lightglue" else "pairs",
+                                     # a third of Hz+'s: Slime's F^theta on ALIKED holds 0.33-0.38 of its
+                                     # matches on Hz+ on graf 1->3 and 1->4 (at most 3072 keypoints a scale)
+                                     "slime_view_support": 35,
                                      "__doc__": f"{extractor} + {matcher} (see :class:`LearnedPipeline`)."})

@@ -15,7 +15,7 @@ Stages and where they live:
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -180,6 +180,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     """
     timer = timer or StageTimer()
     views = views or ViewConfig(mode="off")
+    if views.min_support is None:
+        views = replace(views, min_support=pipeline.slime_view_support)
     size0, size1 = image0.shape[:2], image1.shape[:2]
     layout = Layout.of(size0, size1, config.blocks)
     warnings: list[str] = []

@@ -11,8 +11,11 @@ stopped. The policy, by ``ViewConfig.mode``:
 - "auto": nothing when the plain F^theta holds ``min_support`` matches. Else the first tilt of every viewed
   image, each image's views joining that image's own branch of the plain state; the branch whose F^theta
   holds the most matches leads, and it is kept once it holds ``min_support``; until then the next tilt
-  continues the leading branch only. When no branch reaches it, the plain state is kept (views that found no
-  stronger geometry would only compete with the images' own planes).
+  continues every branch whose views added at least half the matches the leader's added to the plain
+  F^theta (a lead within a factor of two is noise, not a sign of which image the scene's tilt compresses;
+  every branch when the leader's views added none).
+  When no branch reaches it, the plain state is kept (views that found no stronger geometry would only
+  compete with the images' own planes).
 
 Why branches: a scene's tilt is undone by compressing one image or the other, so the two images' view planes
 are never pooled (the wrong image's views would only add planes that compete with the right one's in the
@@ -85,15 +88,16 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
     if views.mode == "off":
         return plain, record
     enough, record.reason = geometry_support(plain.selection, views.min_support)
+    plain_support = int(plain.selection.ftheta.union().sum())
     if views.mode == "auto" and enough:
         record.decision = "not needed"
         return plain, record
     branches: dict[int, PlaneState] = {}
     supports: dict[int, int] = {}  # per image: the distinct matches of its branch's F^theta
     ranges: dict[int, list[tuple[int, int]]] = {}  # per image: the plane ranges of its steps in its branch
-    leader = None
-    for n, tilt in enumerate(views.tilts):
-        for image in views.viewed if n == 0 or views.mode == "always" else (leader,):
+    leader, contenders = None, views.viewed
+    for tilt in views.tilts:
+        for image in contenders:
             state = branches.get(image, plain)
             found = find(image, tilt)
             ranges.setdefault(image, []).append((len(state.planes.H), len(state.planes.H) + len(found.planes.H)))
@@ -106,6 +110,9 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
         if views.mode == "auto" and enough:
             record.decision, record.reason = "kept", f"image {leader}'s views: {reason}"
             break
+        if views.mode == "auto":
+            gains = {image: max(0, supports[image] - plain_support) for image in supports}
+            contenders = tuple(image for image in contenders if 2 * gains[image] >= gains[leader])
     else:
         if views.mode == "always" and leader is not None:
             record.decision, record.reason = "kept", f"every view tried; image {leader}'s views hold the most: {reason}"
