@@ -46,8 +46,8 @@ class ViewConfig:
         min_support: Slime's "auto" adds views while F^theta (the planes the epipolar vote kept, Secs.
             3.6-3.7) holds fewer matches than this; when no view reaches it, the views' planes are dropped
             and the images' own planes decide (views that find no stronger geometry only compete with them).
-            None: the base pipeline's ``slime_view_support`` (100 for the handcrafted bases, 35 for the
-            learned ones, which match the same planes about three times more sparsely).
+            A branch under it is kept too when its views added ``min_support`` times the base pipeline's
+            ``slime_view_gain`` matches to the plain F^theta (``slime.view_step``).
         min_inliers: a base pipeline alone adds views while fewer of its matches than this are consistent
             with one fundamental matrix (OpenCV MAGSAC++, 3 px; a base alone finds far fewer matches than
             Slime).
@@ -56,7 +56,7 @@ class ViewConfig:
     mode: str = "auto"
     tilts: tuple[float, ...] = (2.0, 4.0)
     images: str = "both"
-    min_support: int | None = None
+    min_support: int = 100
     min_inliers: int = 50
 
     def __post_init__(self) -> None:
@@ -66,8 +66,7 @@ class ViewConfig:
     def validate(self) -> ViewConfig:
         check_choice("views.mode", self.mode, VIEW_MODES)
         check_choice("views.images", self.images, VIEW_IMAGES)
-        if self.min_support is not None:
-            check_integer("views.min_support", self.min_support, 1)
+        check_integer("views.min_support", self.min_support, 1)
         check_integer("views.min_inliers", self.min_inliers, 8)
         if not all(t > 1.0 for t in self.tilts):
             raise ConfigError(f"views.tilts must all be > 1 (1 is the image itself), got {self.tilts}")

@@ -72,10 +72,10 @@ def _finder(gains: dict[tuple[int, float], int], calls: list):
     return find
 
 
-def _run(mode: str, images: str, plain: int, gains: dict[tuple[int, float], int]):
+def _run(mode: str, images: str, plain: int, gains: dict[tuple[int, float], int], gain: float = 1.0):
     calls = []
-    state, record = view_step.add_views(_State(plain), ViewConfig(mode=mode, images=images, min_support=100),
-                                        _finder(gains, calls), select=None)
+    state, record = view_step.add_views(_State(plain), ViewConfig(mode=mode, images=images), _finder(gains, calls),
+                                        select=None, gain=gain)
     return state, record, calls
 
 
@@ -133,7 +133,21 @@ def test_auto_drops_the_views_when_no_branch_reaches_the_support():
     state, record, calls = _run("auto", "both", 0, GAINS)  # image 1 leads at tilt 2 (90) and ends at 95
     assert calls == [(0, 2.0), (1, 2.0), (1, 4.0)]
     assert state.steps == () and state.support == 0 and record.decision == "dropped"
-    assert "at best 95 < 100" in record.reason and all(t.ftheta_matches == 0 for t in record.tried)
+    assert "at best 95 < 100 matches, 95 < 100 more" in record.reason
+    assert all(t.ftheta_matches == 0 for t in record.tried)
+
+
+def test_a_branch_under_the_support_is_kept_when_its_views_added_the_bases_gain():
+    gains = {(0, 2.0): 20, (1, 2.0): 30, (0, 4.0): 20, (1, 4.0): 5}
+    state, record, calls = _run("auto", "both", 50, gains, gain=0.35)  # image 0: 40 added at tilt 4, 90 in all
+    assert calls == [(0, 2.0), (1, 2.0), (0, 4.0), (1, 4.0)] and state.steps == (0, 0) and state.support == 90
+    assert record.decision == "kept" and record.reason.startswith("image 0's views: they added 40 >= 35")
+
+
+def test_a_branch_whose_views_added_less_than_the_gain_is_dropped_whatever_the_plain_support():
+    state, record, _ = _run("auto", "both", 90, {(0, 2.0): 5, (1, 2.0): 0, (0, 4.0): 4, (1, 4.0): 0},
+                                gain=0.35)  # 99 < 100 in all, 9 < 35 added
+    assert state.steps == () and record.decision == "dropped" and "9 < 35 more" in record.reason
 
 
 def test_always_tries_every_step_and_keeps_the_strongest_branch():

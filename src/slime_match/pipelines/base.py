@@ -127,9 +127,10 @@ class BasePipeline:
         slime_block_matching: how Slime finds a block pair's first matches on this base by default
             (``SlimeConfig.block_matching``): "pairs" (each block pair, the paper's) or "levels" (each pair of
             block scales' whole images, for a matcher that reads the whole image).
-        slime_view_support: the matches F^theta (the planes Slime's epipolar vote keeps) must hold on this base
-            before simulated views stop being added (``ViewConfig.min_support`` when that is None): it scales
-            with how densely the base matches the same planes.
+        slime_view_gain: the fraction of ``ViewConfig.min_support`` that simulated views must add to the plain
+            F^theta (the planes Slime's epipolar vote keeps) on this base to be kept though F^theta stays under
+            ``min_support`` (:mod:`slime_match.slime.view_step`): it scales with how densely the base matches
+            the same planes.
         options: the :class:`BaseConfig` fields this pipeline reads (``make_config`` refuses the others).
     """
 
@@ -137,7 +138,7 @@ class BasePipeline:
     slime_global_dtm: bool = True
     slime_detection: str = "scale"
     slime_block_matching: str = "pairs"
-    slime_view_support: int = 100
+    slime_view_gain: float = 1.0
     options: frozenset[str] = frozenset()
 
     def __init__(self, config: BaseConfig, device: torch.device) -> None:

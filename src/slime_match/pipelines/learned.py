@@ -214,5 +214,5 @@ def learned_pipeline_class(name: str) -> type[LearnedPipeline]:
                                      "slime_block_matching": "levels" if matcher == "lightglue" else "pairs",
                                      # a third of Hz+'s: Slime's F^theta on ALIKED holds 0.33-0.38 of its
                                      # matches on Hz+ on graf 1->3 and 1->4 (at most 3072 keypoints a scale)
-                                     "slime_view_support": 35,
+                                     "slime_view_gain": 0.35,
                                      "__doc__": f"{extractor} + {matcher} (see :class:`LearnedPipeline`)."})

@@ -15,7 +15,7 @@ Stages and where they live:
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -180,8 +180,6 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
     """
     timer = timer or StageTimer()
     views = views or ViewConfig(mode="off")
-    if views.min_support is None:
-        views = replace(views, min_support=pipeline.slime_view_support)
     size0, size1 = image0.shape[:2], image1.shape[:2]
     layout = Layout.of(size0, size1, config.blocks)
     warnings: list[str] = []
@@ -229,7 +227,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         return _select(found, layout, config, workers, timer)
 
     plain = PlaneState(planes, *select(planes), list(layout.blocks0), list(layout.blocks1))
-    state, record = add_views(plain, views, find, select)
+    state, record = add_views(plain, views, find, select, pipeline.slime_view_gain)
     if views.mode != "off":
         logger.info("Views: %s", record.reason)
     planes, expansion, selection = state.planes, state.expansion, state.selection
