@@ -67,9 +67,14 @@ class PlaneState:
         return PlaneState(planes, *select(planes), blocks0, blocks1)
 
 
+def _support(selection: PlaneSelection) -> int:
+    """The distinct matches of F^theta."""
+    return int(selection.ftheta.union().sum())
+
+
 def geometry_support(selection: PlaneSelection, min_support: int) -> tuple[bool, str]:
     """Whether F^theta holds ``min_support`` matches (enough geometry: no more views), and the count in words."""
-    support = int(selection.ftheta.union().sum())
+    support = _support(selection)
     enough = support >= min_support
     return enough, (f"{'enough' if enough else 'too few'} matches consistent with the planes' epipolar geometry "
                     f"(F^theta): {support} {'>=' if enough else '<'} {min_support}")
@@ -95,7 +100,7 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
     if views.mode == "off":
         return plain, record
     enough, record.reason = geometry_support(plain.selection, views.min_support)
-    plain_support = int(plain.selection.ftheta.union().sum())
+    plain_support = _support(plain.selection)
     min_gain = math.ceil(gain * views.min_support)
     if views.mode == "auto" and enough:
         record.decision = "not needed"
@@ -110,7 +115,7 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
             found = find(image, tilt)
             ranges.setdefault(image, []).append((len(state.planes.H), len(state.planes.H) + len(found.planes.H)))
             branches[image] = state = state.with_views(found, select)
-            supports[image] = int(state.selection.ftheta.union().sum())
+            supports[image] = _support(state.selection)
             record.tried.append(ViewTry(image, tilt, found.views, planes=len(found.planes.H),
                                         support=supports[image]))
         leader = max(supports, key=lambda i: (supports[i], -i))
