@@ -176,8 +176,9 @@ def views_of_tilt(tilt: float) -> list[float]:
 class ViewTry:
     """One (image, tilt) step of the views: its ``views`` of ``image`` (0 or 1) at ``tilt`` and, for Slime,
     the block ``planes`` they found, the matches of F^theta of the image's branch once they joined it
-    (``support``: the plain planes and this image's views so far), the final F^theta's matches on this step's
-    planes (``ftheta_matches``; 0 when they were not kept) and, per view angle in degrees whose planes hold
+    (``support``: the plain planes and this image's views so far) and how many of those lie on the branch's
+    view planes (``on_views``; the rest are the images' own planes' matches, which the views can move through
+    the vote), the final F^theta's matches on this step's planes (``ftheta_matches``; 0 when they were not kept) and, per view angle in degrees whose planes hold
     some, how many (``ftheta_by_angle``)."""
 
     image: int
@@ -185,14 +186,15 @@ class ViewTry:
     views: int
     planes: int | None = None
     support: int | None = None
+    on_views: int | None = None
     ftheta_matches: int | None = None
     ftheta_by_angle: dict[str, int] = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         out = {"image": self.image, "tilt": self.tilt, "views": self.views}
         if self.planes is not None:
-            out.update(planes=self.planes, support=self.support, ftheta_matches=self.ftheta_matches,
-                       ftheta_by_angle=self.ftheta_by_angle)
+            out.update(planes=self.planes, support=self.support, on_views=self.on_views,
+                       ftheta_matches=self.ftheta_matches, ftheta_by_angle=self.ftheta_by_angle)
         return out
 
 

@@ -118,12 +118,13 @@ def test_auto_views_stop_when_the_plain_run_agrees_and_leave_it_when_they_find_n
     unreached = Matcher(make_config("slime", **{"views.tilts": (2.0,), "views.min_support": 10**9}, **options))(a, b)
     record = unreached.summary["decisions"]["views"]
     assert record["views"] == 10 and record["tilts"] == [2.0] and record["decision"] == "dropped" and re.fullmatch(
-        r"every view tried, and F\^theta holds at best \d+ < 1000000000 matches, \d+ < 1000000000 more than "
-        r"the images' own planes': the planes of the images alone "
-        r"are kept", record["reason"])
+        r"every view tried, and F\^theta holds at best \d+ matches, \d+ on the views' own planes and \d+ more than "
+        r"the images' own planes' \(asked: 1000000000 on the views' planes, and 1000000000 in all or 1000000000 "
+        r"more\): the planes of the images alone are kept", record["reason"])
     assert [step["image"] for step in record["tried"]] == [0, 1]  # both images' views, by default
     for step in record["tried"]:
         assert step["planes"] > 0 and step["ftheta_matches"] == 0 and step["ftheta_by_angle"] == {}  # dropped
+        assert 0 <= step["on_views"] <= step["support"]
     for other in (result, unreached):  # auto without views, or with views dropped = off
         np.testing.assert_array_equal(other.keypoints0, off.keypoints0)
         np.testing.assert_array_equal(other.keypoints1, off.keypoints1)

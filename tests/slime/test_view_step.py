@@ -25,6 +25,7 @@ class _Sets:
 @dataclass
 class _Selection:
     ftheta: _Sets
+    on_views: int
 
 
 @dataclass
@@ -34,48 +35,55 @@ class _Planes:
 
 @dataclass
 class _Found:
-    """The views of one (image, tilt): how many, their planes and the F^theta support they add to a branch."""
+    """The views of one (image, tilt): how many, their planes, the F^theta support they add to a branch and how
+    much of it lies on the images' own planes (``moved``: the vote's doing, not the views' planes')."""
 
     image: int
     views: int
     planes: _Planes
     gain: int
+    moved: int = 0
 
 
 @dataclass
 class _State:
-    """A plane state: its F^theta support and the (image, tilt) steps whose planes it holds."""
+    """A plane state: its F^theta support, how much of it its views' planes hold, and the (image, tilt) steps
+    whose planes it holds."""
 
     support: int
     steps: tuple = ()
     planes: _Planes = field(default_factory=lambda: _Planes([0] * 10))
+    on_views: int = 0
 
     @property
     def selection(self) -> _Selection:
-        return _Selection(_Sets(self.support))
+        return _Selection(_Sets(self.support), self.on_views)
 
     def with_views(self, found: _Found, select) -> _State:
         return _State(self.support + found.gain, self.steps + (found.image,),
-                      _Planes(self.planes.H + found.planes.H))
+                      _Planes(self.planes.H + found.planes.H), self.on_views + found.gain - found.moved)
 
 
 @pytest.fixture(autouse=True)
-def _no_angles(monkeypatch):
-    """The stand-in states hold no tile sets: each kept step's F^theta count is its planes' count."""
+def _no_tile_sets(monkeypatch):
+    """The stand-in states hold no tile sets: each kept step's F^theta count is its planes' count, and the
+    views' share of a branch's F^theta is the stand-in's."""
     monkeypatch.setattr(view_step, "_in_ftheta", lambda state, image, start, stop: (stop - start, {}))
+    monkeypatch.setattr(view_step, "_support_from", lambda selection, first: selection.on_views)
 
 
-def _finder(gains: dict[tuple[int, float], int], calls: list):
+def _finder(gains: dict[tuple[int, float], int], calls: list, moved: dict[tuple[int, float], int]):
     def find(image: int, tilt: float) -> _Found:
         calls.append((image, tilt))
-        return _Found(image, 5 if tilt == 2 else 10, _Planes([0] * 3), gains[image, tilt])
+        return _Found(image, 5 if tilt == 2 else 10, _Planes([0] * 3), gains[image, tilt], moved.get((image, tilt), 0))
     return find
 
 
-def _run(mode: str, images: str, plain: int, gains: dict[tuple[int, float], int], gain: float = 1.0):
+def _run(mode: str, images: str, plain: int, gains: dict[tuple[int, float], int], gain: float = 1.0,
+         moved: dict[tuple[int, float], int] | None = None):
     calls = []
-    state, record = view_step.add_views(_State(plain), ViewConfig(mode=mode, images=images), _finder(gains, calls),
-                                        select=None, gain=gain)
+    state, record = view_step.add_views(_State(plain), ViewConfig(mode=mode, images=images),
+                                        _finder(gains, calls, moved or {}), select=None, gain=gain)
     return state, record, calls
 
 
@@ -93,32 +101,36 @@ def test_off_tries_nothing():
 
 
 def test_auto_keeps_the_first_branch_that_reaches_the_support_and_never_pools_the_images():
-    state, record, calls = _run("auto", "both", 30, GAINS)  # image 1's tilt 2 reaches 30 + 90 >= 100
+    gains = GAINS | {(1, 2.0): 100}
+    state, record, calls = _run("auto", "both", 30, gains)  # image 1's tilt 2 reaches 30 + 100 >= 100
     assert calls == [(0, 2.0), (1, 2.0)]
-    assert state.steps == (1,) and state.support == 120  # image 0's views are not in it
-    assert record.decision == "kept" and record.reason.startswith("image 1's views: enough")
-    assert [(t.image, t.support, t.ftheta_matches) for t in record.tried] == [(0, 50, 0), (1, 120, 3)]
+    assert state.steps == (1,) and state.support == 130  # image 0's views are not in it
+    assert record.decision == "kept"
+    assert record.reason.startswith("image 1's views: 100 matches on their own planes; enough")
+    assert [(t.image, t.support, t.ftheta_matches) for t in record.tried] == [(0, 50, 0), (1, 130, 3)]
 
 
 def test_a_branch_accumulates_its_own_tilts():
-    state, record, calls = _run("auto", "image0", 60, GAINS)  # image 0: 60 + 20 < 100, then + 30 >= 100
+    gains = GAINS | {(0, 2.0): 40, (0, 4.0): 60}
+    state, record, calls = _run("auto", "image0", 10, gains)  # image 0: 10 + 40 < 100, then + 60 >= 100
     assert calls == [(0, 2.0), (0, 4.0)] and state.steps == (0, 0) and state.support == 110
     assert record.decision == "kept" and [t.ftheta_matches for t in record.tried] == [3, 3]
 
 
 def test_the_images_are_compared_at_the_same_tilt_not_the_first_to_reach_the_support():
-    state, record, calls = _run("auto", "both", 90, GAINS)  # image 0: 110, image 1: 180, both >= 100
+    gains = GAINS | {(0, 2.0): 110, (1, 2.0): 180}
+    state, record, calls = _run("auto", "both", 0, gains)  # image 0: 110, image 1: 180, both >= 100
     assert calls == [(0, 2.0), (1, 2.0)] and state.steps == (1,) and state.support == 180
     assert [t.support for t in record.tried] == [110, 180] and record.reason.startswith("image 1's views")
 
 
 @pytest.mark.parametrize("plain", [0, 30])
 def test_later_tilts_continue_the_leading_branch_only_when_its_views_added_more_than_twice(plain):
-    gains = {(0, 2.0): 50, (1, 2.0): 20, (0, 4.0): 60 - plain, (1, 4.0): 500}  # with 30: 80 against 50 in all
+    gains = {(0, 2.0): 50, (1, 2.0): 20, (0, 4.0): 60, (1, 4.0): 500}
     state, record, calls = _run("auto", "both", plain, gains)
-    assert calls == [(0, 2.0), (1, 2.0), (0, 4.0)] and state.steps == (0, 0) and state.support == 110
+    assert calls == [(0, 2.0), (1, 2.0), (0, 4.0)] and state.steps == (0, 0) and state.support == plain + 110
     assert [(t.image, t.tilt, t.support, t.ftheta_matches) for t in record.tried] == [
-        (0, 2.0, plain + 50, 3), (1, 2.0, plain + 20, 0), (0, 4.0, 110, 3)]
+        (0, 2.0, plain + 50, 3), (1, 2.0, plain + 20, 0), (0, 4.0, plain + 110, 3)]
 
 
 @pytest.mark.parametrize("gains", [{(0, 2.0): 50, (1, 2.0): 40, (0, 4.0): 60, (1, 4.0): 500},
@@ -133,7 +145,7 @@ def test_auto_drops_the_views_when_no_branch_reaches_the_support():
     state, record, calls = _run("auto", "both", 0, GAINS)  # image 1 leads at tilt 2 (90) and ends at 95
     assert calls == [(0, 2.0), (1, 2.0), (1, 4.0)]
     assert state.steps == () and state.support == 0 and record.decision == "dropped"
-    assert "at best 95 < 100 matches, 95 < 100 more" in record.reason
+    assert "at best 95 matches, 95 on the views' own planes and 95 more" in record.reason
     assert all(t.ftheta_matches == 0 for t in record.tried)
 
 
@@ -141,13 +153,33 @@ def test_a_branch_under_the_support_is_kept_when_its_views_added_the_bases_gain(
     gains = {(0, 2.0): 20, (1, 2.0): 30, (0, 4.0): 20, (1, 4.0): 5}
     state, record, calls = _run("auto", "both", 50, gains, gain=0.35)  # image 0: 40 added at tilt 4, 90 in all
     assert calls == [(0, 2.0), (1, 2.0), (0, 4.0), (1, 4.0)] and state.steps == (0, 0) and state.support == 90
-    assert record.decision == "kept" and record.reason.startswith("image 0's views: they added 40 >= 35")
+    assert record.decision == "kept" and record.reason.startswith("image 0's views: 40 matches on their own planes; "
+                                                                  "they added 40 >= 35")
 
 
 def test_a_branch_whose_views_added_less_than_the_gain_is_dropped_whatever_the_plain_support():
     state, record, _ = _run("auto", "both", 90, {(0, 2.0): 5, (1, 2.0): 0, (0, 4.0): 4, (1, 4.0): 0},
                                 gain=0.35)  # 99 < 100 in all, 9 < 35 added
-    assert state.steps == () and record.decision == "dropped" and "9 < 35 more" in record.reason
+    assert state.steps == () and record.decision == "dropped" and "9 more" in record.reason
+
+
+@pytest.mark.parametrize("gain", [1.0, 0.35])
+def test_a_branch_whose_matches_the_views_only_moved_onto_the_images_own_planes_is_dropped(gain):
+    gains = {(0, 2.0): 10, (1, 2.0): 60, (0, 4.0): 5, (1, 4.0): 10}
+    moved = {(1, 2.0): 60, (1, 4.0): 10}  # image 1's branch reaches 110 >= 100, none on its views' planes
+    state, record, calls = _run("auto", "both", 40, gains, gain=gain, moved=moved)
+    assert calls == [(0, 2.0), (1, 2.0), (1, 4.0)] and state.steps == () and record.decision == "dropped"
+    assert [t.on_views for t in record.tried] == [10, 0, 0]
+    assert "at best 110 matches, 0 on the views' own planes" in record.reason
+
+
+def test_a_branch_is_kept_once_its_views_planes_hold_the_gain():
+    gains = {(0, 2.0): 10, (1, 2.0): 80, (0, 4.0): 5, (1, 4.0): 60}
+    moved = {(1, 2.0): 40}  # image 1: 40 of 120 on its views' planes at tilt 2, 100 of 180 at tilt 4
+    state, record, calls = _run("auto", "both", 40, gains, moved=moved)
+    assert calls == [(0, 2.0), (1, 2.0), (1, 4.0)] and state.steps == (1, 1) and state.support == 180
+    assert [t.on_views for t in record.tried] == [10, 40, 100]
+    assert record.decision == "kept" and record.reason.startswith("image 1's views: 100 matches on their own planes")
 
 
 def test_always_tries_every_step_and_keeps_the_strongest_branch():

@@ -10,10 +10,12 @@ stopped. The policy, by ``ViewConfig.mode``:
   vote kept, Secs. 3.6-3.7) the most matches is kept.
 - "auto": nothing when the plain F^theta holds ``min_support`` matches. Else the first tilt of every viewed
   image, each image's views joining that image's own branch of the plain state; the branch whose F^theta
-  holds the most matches leads, and it is kept once it holds ``min_support``, or once its views added
-  ``min_support`` times the base's ``slime_view_gain`` matches to the plain F^theta (1 for the handcrafted
-  bases; 0.35 for the learned ones, which match the same planes about three times more sparsely and reach
-  fewer matches on a correct geometry); until then the next tilt
+  holds the most matches leads. With ``gain`` = ``min_support`` times the base's ``slime_view_gain`` (1 for
+  the handcrafted bases; 0.35 for the learned ones, which match the same planes about three times more
+  sparsely and reach fewer matches on a correct geometry), the leader is kept once the views' own planes hold
+  ``gain`` of its F^theta matches and its F^theta holds ``min_support`` or ``gain`` more than the plain one
+  (matches the views only moved onto the images' own planes, through the vote, are no sign that the views
+  found the scene's geometry); until then the next tilt
   continues every branch whose views added at least half the matches the leader's added to the plain
   F^theta (a lead within a factor of two is noise, not a sign of which image the scene's tilt compresses;
   every branch when the leader's views added none).
@@ -72,6 +74,12 @@ def _support(selection: PlaneSelection) -> int:
     return int(selection.ftheta.union().sum())
 
 
+def _support_from(selection: PlaneSelection, first: int) -> int:
+    """The distinct matches of F^theta on the planes ``l >= first`` (a branch's views' planes)."""
+    ftheta = selection.ftheta
+    return int(ftheta.subset(np.flatnonzero(ftheta.plane >= first)).union().sum())
+
+
 def geometry_support(selection: PlaneSelection, min_support: int) -> tuple[bool, str]:
     """Whether F^theta holds ``min_support`` matches (enough geometry: no more views), and the count in words."""
     support = _support(selection)
@@ -107,6 +115,7 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
         return plain, record
     branches: dict[int, PlaneState] = {}
     supports: dict[int, int] = {}  # per image: the distinct matches of its branch's F^theta
+    on_views: dict[int, int] = {}  # per image: those on its views' planes
     ranges: dict[int, list[tuple[int, int]]] = {}  # per image: the plane ranges of its steps in its branch
     leader, contenders = None, views.viewed
     for tilt in views.tilts:
@@ -116,16 +125,18 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
             ranges.setdefault(image, []).append((len(state.planes.H), len(state.planes.H) + len(found.planes.H)))
             branches[image] = state = state.with_views(found, select)
             supports[image] = _support(state.selection)
+            on_views[image] = _support_from(state.selection, len(plain.planes.H))
             record.tried.append(ViewTry(image, tilt, found.views, planes=len(found.planes.H),
-                                        support=supports[image]))
+                                        support=supports[image], on_views=on_views[image]))
         leader = max(supports, key=lambda i: (supports[i], -i))
         enough, reason = geometry_support(branches[leader].selection, views.min_support)
         gains = {image: max(0, supports[image] - plain_support) for image in supports}
-        if views.mode == "auto" and (enough or gains[leader] >= min_gain):
+        if views.mode == "auto" and on_views[leader] >= min_gain and (enough or gains[leader] >= min_gain):
             if not enough:
                 reason = (f"they added {gains[leader]} >= {min_gain} matches to the images' own F^theta "
                           f"({plain_support}; {reason})")
-            record.decision, record.reason = "kept", f"image {leader}'s views: {reason}"
+            record.decision = "kept"
+            record.reason = f"image {leader}'s views: {on_views[leader]} matches on their own planes; {reason}"
             break
         if views.mode == "auto":
             contenders = tuple(image for image in contenders if 2 * gains[image] >= gains[leader])
@@ -133,8 +144,9 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
         if views.mode == "always" and leader is not None:
             record.decision, record.reason = "kept", f"every view tried; image {leader}'s views hold the most: {reason}"
         else:
-            best = (f"at best {supports[leader]} < {views.min_support} matches, {gains[leader]} < {min_gain} more "
-                    f"than the images' own planes'" if leader is not None else "no view")
+            best = (f"at best {supports[leader]} matches, {on_views[leader]} on the views' own planes and "
+                    f"{gains[leader]} more than the images' own planes' (asked: {min_gain} on the views' planes, "
+                    f"and {views.min_support} in all or {min_gain} more)" if leader is not None else "no view")
             leader, record.decision = None, "dropped"
             record.reason = f"every view tried, and F^theta holds {best}: the planes of the images alone are kept"
     final = plain if leader is None else branches[leader]

@@ -73,6 +73,8 @@ def decision_lines(decisions: dict[str, Any]) -> list[str]:
                 line += f", {step['planes']} planes"
                 if "support" in step:  # F^theta of the image's branch once the step joined it
                     line += f", F^theta with them {step['support']}"
+                    if step.get("on_views") is not None:
+                        line += f" ({step['on_views']} on the views' planes)"
                 line += f", {step['ftheta_matches']} matches kept in F^theta" + (f" ({angles})" if angles else "")
             lines.append(line)
     if "vote" in decisions:
