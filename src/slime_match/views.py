@@ -178,8 +178,8 @@ class ViewTry:
     the block ``planes`` they found, the matches of F^theta of the image's branch once they joined it
     (``support``: the plain planes and this image's views so far) and how many of those lie on the branch's
     view planes (``on_views``; the rest are the images' own planes' matches, which the views can move through
-    the vote), the final F^theta's matches on this step's planes (``ftheta_matches``; 0 when they were not kept) and, per view angle in degrees whose planes hold
-    some, how many (``ftheta_by_angle``)."""
+    the vote), the final F^theta's matches on this step's planes (``ftheta_matches``; 0 when they were not
+    kept) and, per view angle in degrees whose planes hold some, how many (``ftheta_by_angle``)."""
 
     image: int
     tilt: float
