@@ -74,10 +74,14 @@ def _support(selection: PlaneSelection) -> int:
     return int(selection.ftheta.union().sum())
 
 
+def _sets_on_planes(ftheta: TileSets, start: int, stop: int | None = None) -> np.ndarray:
+    """The indices of F^theta's tile sets on the planes ``start <= l < stop`` (no upper bound: None)."""
+    return np.flatnonzero((ftheta.plane >= start) & (ftheta.plane < (np.inf if stop is None else stop)))
+
+
 def _support_from(selection: PlaneSelection, first: int) -> int:
     """The distinct matches of F^theta on the planes ``l >= first`` (a branch's views' planes)."""
-    ftheta = selection.ftheta
-    return int(ftheta.subset(np.flatnonzero(ftheta.plane >= first)).union().sum())
+    return int(selection.ftheta.subset(_sets_on_planes(selection.ftheta, first)).union().sum())
 
 
 def geometry_support(selection: PlaneSelection, min_support: int) -> tuple[bool, str]:
@@ -163,7 +167,7 @@ def _in_ftheta(state: PlaneState, image: int, start: int, stop: int) -> tuple[in
     """The distinct F^theta matches on the planes ``start <= l < stop`` (one step's views of ``image``; none
     when those planes were dropped), in all and per view angle (degrees) that holds some."""
     ftheta: TileSets = state.selection.ftheta
-    ours = np.flatnonzero((ftheta.plane >= start) & (ftheta.plane < stop))
+    ours = _sets_on_planes(ftheta, start, stop)
     blocks, of_plane = (state.blocks0, state.blocks1)[image], state.planes.level_matches.pairs[:, image]
     angles = np.array([blocks[of_plane[plane]].view.angle for plane in ftheta.plane[ours]])
     by_angle = {f"{angle:g}": int(ftheta.subset(ours[angles == angle]).union().sum()) for angle in np.unique(angles)}
