@@ -99,6 +99,9 @@ def test_dotted_slime_options_are_refused_for_a_base_alone():
     ("slime", {"views": "off", "views.min_support": 50}, "they are off"),
     ("slime", {"views": "always", "views.min_support": 50}, "the mode is 'always', which adds them all"),
     ("rootsift", {"views": "always", "views.min_inliers": 20}, "the mode is 'always'"),
+    ("slime", {"views.min_probe": 10}, r"'views.min_probe' is the probe .* Slime on hz\+ matches block pairs"),
+    ("aliked-lg", {"views.min_probe": 10}, r"method 'aliked-lg' runs the aliked-lg pipeline alone"),
+    ("slime-aliked", {"views.min_probe": -1}, "views.min_probe"),
 ])
 def test_view_options_the_run_would_not_read_are_refused(preset, options, message):
     with pytest.raises(sm.ConfigError, match=message) as info:
@@ -111,6 +114,8 @@ def test_view_options_the_run_reads_are_accepted():
     assert sm.make_config("hz+", **{"views.min_inliers": 30}).views.min_inliers == 30
     assert sm.make_config("slime", **{"views.min_support": 80}).views.min_support == 80
     assert sm.make_config("slime", views="off").views.mode == "off"
+    assert sm.make_config("slime-aliked", views="always", **{"views.min_probe": 0}).views.min_probe == 0
+    assert sm.make_config("slime", block_matching="levels", **{"views.min_probe": 5}).views.min_probe == 5
     recorded = sm.make_config("slime", views="off")  # options of a recorded configuration are not re-judged
     assert with_options(recorded, views="auto", **{"views.min_support": 90}).views.min_support == 90
 

@@ -294,11 +294,20 @@ VIEW_CRITERIA = {"min_support": ("slime", "matches of F^theta, the planes Slime'
 
 def _refuse_unread_view_option(config: MatchConfig, key: str, name: str) -> None:
     """Raise ConfigError for a ``views.*`` option (other than the mode) that the run would not read: any with
-    the views off, a criterion of "auto" under "always", or the other kind of method's criterion."""
+    the views off, a criterion of "auto" under "always", the other kind of method's criterion, or the views'
+    probe where Slime does not match whole levels."""
     mode = config.views.mode
     if mode == "off":
         raise ConfigError(f"{key!r} sets the simulated views, and they are off: drop it or turn the views on "
                           "(views=auto|always, --views)")
+    if name == "min_probe":
+        matching = config.slime.block_matching or PIPELINES[config.base.name].slime_block_matching
+        if config.method != "slime" or matching != "levels":
+            runs = (f"Slime on {config.base.name} matches block pairs one by one (block_matching 'pairs')"
+                    if config.method == "slime" else f"method {config.method!r} runs the {config.method} pipeline alone")
+            raise ConfigError(f"{key!r} is the probe Slime runs on each view when it matches whole levels "
+                              f"(block_matching 'levels'), and {runs}: drop it or set block_matching=levels")
+        return
     if name not in VIEW_CRITERIA:
         return
     reader, counted = VIEW_CRITERIA[name]

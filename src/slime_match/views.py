@@ -51,6 +51,10 @@ class ViewConfig:
         min_inliers: a base pipeline alone adds views while fewer of its matches than this are consistent
             with one fundamental matrix (OpenCV MAGSAC++, 3 px; a base alone finds far fewer matches than
             Slime).
+        min_probe: Slime with level matching (``SlimeConfig.block_matching``, a matcher that reads whole
+            images) pairs a view's blocks only when its probe, its finest level matched against the other
+            image's level of the nearest scale, holds this many matches consistent with one fundamental matrix
+            (``slime.view_planes``); 0 pairs every view's blocks.
     """
 
     mode: str = "auto"
@@ -58,6 +62,7 @@ class ViewConfig:
     images: str = "both"
     min_support: int = 100
     min_inliers: int = 50
+    min_probe: int = 25
 
     def __post_init__(self) -> None:
         self.tilts = tuple(float(t) for t in self.tilts)
@@ -68,6 +73,7 @@ class ViewConfig:
         check_choice("views.images", self.images, VIEW_IMAGES)
         check_integer("views.min_support", self.min_support, 1)
         check_integer("views.min_inliers", self.min_inliers, 8)
+        check_integer("views.min_probe", self.min_probe, 0)
         if not all(t > 1.0 for t in self.tilts):
             raise ConfigError(f"views.tilts must all be > 1 (1 is the image itself), got {self.tilts}")
         return self
@@ -179,7 +185,9 @@ class ViewTry:
     (``support``: the plain planes and this image's views so far) and how many of those lie on the branch's
     view planes (``on_views``; the rest are the images' own planes' matches, which the views can move through
     the vote), the final F^theta's matches on this step's planes (``ftheta_matches``; 0 when they were not
-    kept) and, per view angle in degrees whose planes hold some, how many (``ftheta_by_angle``)."""
+    kept) and, per view angle in degrees whose planes hold some, how many (``ftheta_by_angle``); when the views
+    were probed (``ViewConfig.min_probe``), each view's probe count by angle (``probes``) and how many views
+    had their blocks paired (``paired``)."""
 
     image: int
     tilt: float
@@ -189,12 +197,16 @@ class ViewTry:
     on_views: int | None = None
     ftheta_matches: int | None = None
     ftheta_by_angle: dict[str, int] = field(default_factory=dict)
+    probes: dict[str, int] = field(default_factory=dict)
+    paired: int | None = None
 
     def as_dict(self) -> dict:
         out = {"image": self.image, "tilt": self.tilt, "views": self.views}
         if self.planes is not None:
             out.update(planes=self.planes, support=self.support, on_views=self.on_views,
                        ftheta_matches=self.ftheta_matches, ftheta_by_angle=self.ftheta_by_angle)
+        if self.probes:
+            out.update(probes=self.probes, paired=self.paired)
         return out
 
 

@@ -5,6 +5,7 @@ import dataclasses
 
 import cv2
 import numpy as np
+import pytest
 import torch
 
 from slime_match.geometry.homography import homography_dlt, project
@@ -16,6 +17,7 @@ from slime_match.slime.block_planes import (
     _from_level_pairs,
     block_planes,
     block_planes_to_original,
+    level_pair_key,
     match_block_pairs,
 )
 from slime_match.slime.blocks import make_blocks
@@ -179,7 +181,7 @@ def test_a_plane_counts_distinct_keypoints():
     assert distinct_keypoints(Matches.empty()) == 0
 
 
-def test_levels_matching_shares_each_level_pairs_matches_out_to_its_block_pairs(levels):
+def test_levels_matching_shares_each_level_pairs_matches_out_to_its_block_pairs(levels, monkeypatch):
     """``matching="levels"``: the base pipeline matches the two whole levels once, and each block pair gets,
     in order, exactly those matches whose two ends lie in its blocks' cores, indexed into the blocks' own
     features; planes come out of them as from per-pair matching."""
@@ -203,3 +205,10 @@ def test_levels_matching_shares_each_level_pairs_matches_out_to_its_block_pairs(
     ransac = HomographyRansacConfig(threshold=15.0)
     _, counts = match_block_pairs(pipeline, levels0, levels1, blocks, blocks, ransac, matching="levels")
     assert counts["block_pairs"] == len(pairs) and counts["block_planes"] > 0
+    # a level pair matched before (a view's probe) is not matched again: its matches are the ones given
+    given = whole.subset(np.arange(len(whole)) % 2 == 0)
+    monkeypatch.setattr(pipeline, "match", lambda *args, **kwargs: pytest.fail("the level pair was matched again"))
+    again = _from_level_pairs(pipeline, side0, side1, pairs, 1, {level_pair_key(level0, level1): given})
+    for (w0, w1), (m, xy0, _) in zip(pairs, again):
+        inside = np.isin(given.idx0, level0.members[w0]) & np.isin(given.idx1, level1.members[w1])
+        np.testing.assert_array_equal(xy0, level0.features.xy.numpy()[given.idx0[inside]])

@@ -43,6 +43,8 @@ class _Found:
     planes: _Planes
     gain: int
     moved: int = 0
+    probes: dict = field(default_factory=dict)
+    paired: int = 0
 
 
 @dataclass

@@ -34,9 +34,11 @@ from .match_table import MatchTable, deduplicate
 from .orientations import orientation_bin, relative_orientation
 
 BLOCK_MATCHINGS = ("pairs", "levels")  # how a block pair's first matches are found (module docstring)
+LevelPairMatches = dict[tuple[int, int], Matches]  # the base pipeline's matches per pair of levels (level_pair_key)
 
-__all__ = ["BLOCK_MATCHINGS", "BlockPairMatches", "BlockPlanes", "block_planes", "block_planes_to_original",
-           "distinct_keypoints", "match_block_pairs", "plane_sides"]
+__all__ = ["BLOCK_MATCHINGS", "BlockPairMatches", "BlockPlanes", "LevelPairMatches", "block_planes",
+           "block_planes_to_original", "distinct_keypoints", "level_pair_key", "match_block_pairs",
+           "match_level_pairs", "plane_sides"]
 
 
 @dataclass
@@ -121,6 +123,7 @@ def match_block_pairs(
     workers: int = 1,
     fixed: FixedDescriptors | None = None,
     matching: str = "pairs",
+    matched: LevelPairMatches | None = None,
 ) -> tuple[BlockPairMatches, dict[str, int]]:
     """Secs. 3.2 + 3.3 for every block pair: base pipeline + homography RANSAC, then the re-run with
     fixed orientations (theta = 0 in image 0, theta* in image 1) + RANSAC -> M_l and H_l.
@@ -131,7 +134,7 @@ def match_block_pairs(
     A plane needs ``min_matches`` RANSAC inliers with as many distinct keypoints in each image (the base
     pipeline may match one keypoint several times). ``fixed`` holds the fixed-orientation descriptors of
     earlier calls on the same levels (image 1's, shared by the plain blocks and the simulated views); None
-    starts an empty one.
+    starts an empty one. ``matched`` holds level pairs the base pipeline already matched (``"levels"``).
 
     Returns:
         The refined planes and their matches, in level pixels, and counts for the summary: block pairs,
@@ -148,7 +151,7 @@ def match_block_pairs(
 
     # 3.2: the base pipeline with its own orientations, then RANSAC.
     if matching == "levels":
-        first = _from_level_pairs(pipeline, side0, side1, pairs, workers)
+        first = _from_level_pairs(pipeline, side0, side1, pairs, workers, matched)
     else:
         first = match_jobs(pipeline, len(pairs), own_job, pair_workers(len(pairs), workers))
     results = ransac_batches([(xy0, xy1) for _, xy0, xy1 in first], ransac, seed, workers)
@@ -201,19 +204,33 @@ def match_block_pairs(
     return _collect(keep_pairs, hs, theta_out, parts), counts
 
 
-def _from_level_pairs(pipeline: BasePipeline, side0: _BlockSide, side1: _BlockSide, pairs: list[tuple[int, int]],
-                      workers: int) -> list[JobMatches]:
-    """Per block pair, the matches between its two cores taken from the base pipeline on the blocks' whole
-    levels (each pair of levels matched once, in ``workers`` processes; one on CUDA)."""
-    level_of = [{w: side.wanted(w)[0] for w in range(len(side.blocks))} for side in (side0, side1)]
-    level_pairs = sorted({(id(level_of[0][w0]), id(level_of[1][w1])) for w0, w1 in pairs})
-    levels = {id(level): level for side in level_of for level in side.values()}
+def level_pair_key(level0: ScaleLevel, level1: ScaleLevel) -> tuple[int, int]:
+    """The key of a pair of levels (the very objects) in a :data:`LevelPairMatches`."""
+    return id(level0), id(level1)
+
+
+def match_level_pairs(pipeline: BasePipeline, pairs: list[tuple[ScaleLevel, ScaleLevel]], workers: int
+                      ) -> LevelPairMatches:
+    """The base pipeline's matches of each pair of whole levels, in ``workers`` processes (one on CUDA)."""
 
     def match(k: int) -> Matches:
-        level0, level1 = (levels[key] for key in level_pairs[k])
+        level0, level1 = pairs[k]
         return pipeline.match(level0.features, level1.features, level0.size, level1.size)
 
-    found = dict(zip(level_pairs, fork_map(match, len(level_pairs), device_workers(pipeline, workers))))
+    found = fork_map(match, len(pairs), device_workers(pipeline, workers))
+    return {level_pair_key(*pair): m for pair, m in zip(pairs, found)}
+
+
+def _from_level_pairs(pipeline: BasePipeline, side0: _BlockSide, side1: _BlockSide, pairs: list[tuple[int, int]],
+                      workers: int, matched: LevelPairMatches | None = None) -> list[JobMatches]:
+    """Per block pair, the matches between its two cores taken from the base pipeline on the blocks' whole
+    levels (each pair of levels matched once, unless ``matched`` holds it)."""
+    level_of = [{w: side.wanted(w)[0] for w in range(len(side.blocks))} for side in (side0, side1)]
+    level_pairs = sorted({level_pair_key(level_of[0][w0], level_of[1][w1]) for w0, w1 in pairs})
+    levels = {id(level): level for side in level_of for level in side.values()}
+    matched = matched or {}
+    missing = [(levels[key0], levels[key1]) for key0, key1 in level_pairs if (key0, key1) not in matched]
+    found = {**matched, **match_level_pairs(pipeline, missing, workers)}
     xy = {key: level.features.xy.detach().cpu().numpy().astype(np.float64) for key, level in levels.items()}
     local = [{}, {}]  # per side and block: level index -> index among the block's own features (-1: outside)
 
@@ -345,13 +362,13 @@ class BlockPlanes:
 
 def block_planes(pipeline: BasePipeline, levels0: list[ScaleLevel], levels1: list[ScaleLevel], blocks0: list[Block],
                  blocks1: list[Block], ransac: HomographyRansacConfig, bins: int = 16, min_matches: int = 8,
-                 seed: int = 0, workers: int = 1, fixed: FixedDescriptors | None = None, matching: str = "pairs"
-                 ) -> BlockPlanes:
+                 seed: int = 0, workers: int = 1, fixed: FixedDescriptors | None = None, matching: str = "pairs",
+                 matched: LevelPairMatches | None = None) -> BlockPlanes:
     """Secs. 3.2-3.3 (``match_block_pairs``, same arguments), the planes mapped to original pixels and their
     matches gathered in one deduplicated match table."""
     matches, counts = match_block_pairs(pipeline, levels0, levels1, blocks0, blocks1, ransac, bins=bins,
                                         min_matches=min_matches, seed=seed, workers=workers, fixed=fixed,
-                                        matching=matching)
+                                        matching=matching, matched=matched)
     raw, h, side = block_planes_to_original(matches, blocks0, blocks1)
     table, _ = deduplicate(raw)
     counts.update(block_matches=len(raw), block_matches_unique=len(table))

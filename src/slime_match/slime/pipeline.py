@@ -219,8 +219,10 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         with timer("views"), torch_threads(1):
             found = view_planes(pipeline, images[image], image, tilt, features.levels[1 - image],
                                 (layout.blocks0, layout.blocks1)[1 - image], config.blocks, config.ransac, detection,
-                                config.bins, config.min_plane_matches, seed, workers, level_cache, fixed, matching)
-        logger.info("Views of image %d at tilt %g: %d views, %d planes", image, tilt, found.views, len(found.planes.H))
+                                config.bins, config.min_plane_matches, seed, workers, level_cache, fixed, matching,
+                                views.min_probe)
+        logger.info("Views of image %d at tilt %g: %d views (%d paired), %d planes", image, tilt, found.views,
+                    found.paired, len(found.planes.H))
         return found
 
     def select(found: BlockPlanes) -> tuple[Expansion, PlaneSelection]:
