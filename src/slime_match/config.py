@@ -300,7 +300,7 @@ def _refuse_unread_view_option(config: MatchConfig, key: str, name: str) -> None
     if mode == "off":
         raise ConfigError(f"{key!r} sets the simulated views, and they are off: drop it or turn the views on "
                           "(views=auto|always, --views)")
-    if name == "min_probe":
+    if name in ("min_probe", "screen_keypoints"):
         matching = config.slime.block_matching or PIPELINES[config.base.name].slime_block_matching
         if config.method != "slime" or matching != "levels":
             runs = (f"Slime on {config.base.name} matches block pairs one by one (block_matching 'pairs')"

@@ -55,6 +55,9 @@ class ViewConfig:
             images) pairs a view's blocks only when its probe, its finest level matched against the other
             image's level of the nearest scale, holds this many matches consistent with one fundamental matrix
             (``slime.view_planes``); 0 pairs every view's blocks.
+        screen_keypoints: the probe is screened first on this many of each level's strongest keypoints, and
+            a view whose screen holds fewer than ``slime.view_planes.SCREEN_FLOOR`` (10) consistent matches
+            is not probed in full (0: every view probed in full).
     """
 
     mode: str = "auto"
@@ -63,6 +66,7 @@ class ViewConfig:
     min_support: int = 100
     min_inliers: int = 50
     min_probe: int = 25
+    screen_keypoints: int = 1024
 
     def __post_init__(self) -> None:
         self.tilts = tuple(float(t) for t in self.tilts)
@@ -74,6 +78,7 @@ class ViewConfig:
         check_integer("views.min_support", self.min_support, 1)
         check_integer("views.min_inliers", self.min_inliers, 8)
         check_integer("views.min_probe", self.min_probe, 0)
+        check_integer("views.screen_keypoints", self.screen_keypoints, 0)
         if not all(t > 1.0 for t in self.tilts):
             raise ConfigError(f"views.tilts must all be > 1 (1 is the image itself), got {self.tilts}")
         return self
@@ -186,8 +191,9 @@ class ViewTry:
     view planes (``on_views``; the rest are the images' own planes' matches, which the views can move through
     the vote), the final F^theta's matches on this step's planes (``ftheta_matches``; 0 when they were not
     kept) and, per view angle in degrees whose planes hold some, how many (``ftheta_by_angle``); when the views
-    were probed (``ViewConfig.min_probe``), each view's probe count by angle (``probes``) and how many views
-    had their blocks paired (``paired``)."""
+    were probed (``ViewConfig.min_probe``), each view's screen count by angle (``screens``, when screened), the
+    probe count of each view probed in full (``probes``) and how many views had their blocks paired
+    (``paired``)."""
 
     image: int
     tilt: float
@@ -198,6 +204,7 @@ class ViewTry:
     ftheta_matches: int | None = None
     ftheta_by_angle: dict[str, int] = field(default_factory=dict)
     probes: dict[str, int] = field(default_factory=dict)
+    screens: dict[str, int] = field(default_factory=dict)
     paired: int | None = None
 
     def as_dict(self) -> dict:
@@ -205,8 +212,8 @@ class ViewTry:
         if self.planes is not None:
             out.update(planes=self.planes, support=self.support, on_views=self.on_views,
                        ftheta_matches=self.ftheta_matches, ftheta_by_angle=self.ftheta_by_angle)
-        if self.probes:
-            out.update(probes=self.probes, paired=self.paired)
+        if self.probes or self.screens:
+            out.update(screens=self.screens, probes=self.probes, paired=self.paired)
         return out
 
 

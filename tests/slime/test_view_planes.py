@@ -105,13 +105,14 @@ def test_views_of_image_1_hold_the_pairs_geometry_with_the_images_exchanged(graf
 def test_views_probed_on_their_finest_level_pair_only_those_above_the_floor(graf_small):  # noqa: F811
     """With level matching, each view's finest level is matched against image 1 first: the views whose probe
     holds ``views.min_probe`` epipolar-consistent matches are paired, the others are not; a floor every view
-    passes gives exactly the unprobed result (the probe's matches are the level pair's own)."""
+    passes gives exactly the unprobed result (the probe's matches are the level pair's own). A screen on
+    fewer keypoints first leaves the views under its floor unprobed."""
     a, b, _ = graf_small
 
-    def run(min_probe: int):
+    def run(min_probe: int, screen: int = 0):
         config = make_config("slime", views="always", scales=(1, 2), keep_stages=True, block_matching="levels",
-                             **{"views.tilts": (2.0,), "views.images": "image0", "views.min_probe": min_probe},
-                             **WEIGHT_FREE)
+                             **{"views.tilts": (2.0,), "views.images": "image0", "views.min_probe": min_probe,
+                                "views.screen_keypoints": screen}, **WEIGHT_FREE)
         result = Matcher(config)(a, b)
         step, = result.summary["decisions"]["views"]["tried"]
         return result, step
@@ -121,6 +122,7 @@ def test_views_probed_on_their_finest_level_pair_only_those_above_the_floor(graf
     everyone, step = run(1)
     probes = step["probes"]
     assert set(probes) == {"0", "36", "72", "108", "144"} and min(probes.values()) >= 1 and step["paired"] == 5
+    assert step["screens"] == {}
     for name in ("keypoints0", "keypoints1", "scores"):
         np.testing.assert_array_equal(getattr(everyone, name), getattr(unprobed, name))
     floor = sorted(probes.values())[-2]  # the two strongest views pass
@@ -132,6 +134,13 @@ def test_views_probed_on_their_finest_level_pair_only_those_above_the_floor(graf
     assert from_view.any() and set(stages["planes_view0"][from_view, 1]) <= passed
     _, step = run(max(probes.values()) + 1)
     assert step["paired"] == 0 and step["planes"] == 0
+    # a screen on more keypoints than the levels hold is the probe itself: every view passes it
+    _, step = run(1, screen=10**6)
+    assert step["screens"] == probes == step["probes"] and step["paired"] == 5
+    # on 2 keypoints a side no screen has the 8 matches a fundamental matrix needs: none probed in full, none paired
+    _, step = run(1, screen=2)
+    assert step["screens"] == dict.fromkeys(probes, 0)
+    assert step["probes"] == {} and step["paired"] == 0 and step["planes"] == 0
 
 
 def test_auto_views_stop_when_the_plain_run_agrees_and_leave_it_when_they_find_nothing_stronger(graf_small):  # noqa: F811

@@ -44,6 +44,7 @@ class _Found:
     gain: int
     moved: int = 0
     probes: dict = field(default_factory=dict)
+    screens: dict = field(default_factory=dict)
     paired: int = 0
 
 

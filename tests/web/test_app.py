@@ -285,7 +285,8 @@ def test_the_decisions_of_a_run_read_as_lines():
              "reason": "image 1's views: enough matches consistent with the planes' epipolar geometry (F^theta): "
                        "150 >= 100",
              "tried": [{"image": 0, "tilt": 2.0, "views": 5, "planes": 3, "support": 20, "ftheta_matches": 0,
-                        "ftheta_by_angle": {}, "probes": {"0": 12, "36": 30, "72": 3, "108": 0, "144": 1}, "paired": 1},
+                        "ftheta_by_angle": {}, "screens": {"0": 12, "36": 22, "72": 3, "108": 0, "144": 1},
+                        "probes": {"0": 14, "36": 30}, "paired": 1},
                        {"image": 1, "tilt": 2.0, "views": 5, "planes": 9, "support": 150, "on_views": 145,
                         "ftheta_matches": 140,
                         "ftheta_by_angle": {"0": 100, "36": 40}}]}
@@ -296,8 +297,8 @@ def test_the_decisions_of_a_run_read_as_lines():
         "method: slime-aliked (its weights are cached)",
         ("simulated views (auto, of both images): kept: image 1's views: enough matches consistent with the "
          "planes' epipolar geometry (F^theta): 150 >= 100"),
-        ("  image 0, tilt 2: 5 views (1 paired after their probes; best probe 30 consistent matches at 36 deg), "
-         "3 planes, F^theta with them 20, 0 matches kept in F^theta"),
+        ("  image 0, tilt 2: 5 views (1 paired after their probes; best screen 22 consistent matches at 36 deg, "
+         "best probe 30 consistent matches at 36 deg), 3 planes, F^theta with them 20, 0 matches kept in F^theta"),
         ("  image 1, tilt 2: 5 views, 9 planes, F^theta with them 150 (145 on the views' planes), 140 matches kept "
          "in F^theta (100 at 0 deg, 40 at 36 deg)"),
         "epipolar vote: consensus (3 homographies share F)",

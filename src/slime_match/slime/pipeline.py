@@ -220,7 +220,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
             found = view_planes(pipeline, images[image], image, tilt, features.levels[1 - image],
                                 (layout.blocks0, layout.blocks1)[1 - image], config.blocks, config.ransac, detection,
                                 config.bins, config.min_plane_matches, seed, workers, level_cache, fixed, matching,
-                                views.min_probe)
+                                views.min_probe, views.screen_keypoints)
         logger.info("Views of image %d at tilt %g: %d views (%d paired), %d planes", image, tilt, found.views,
                     found.paired, len(found.planes.H))
         return found

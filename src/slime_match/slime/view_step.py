@@ -132,7 +132,7 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
             on_views[image] = _support_from(state.selection, len(plain.planes.H))
             record.tried.append(ViewTry(image, tilt, found.views, planes=len(found.planes.H),
                                         support=supports[image], on_views=on_views[image], probes=found.probes,
-                                        paired=found.paired))
+                                        screens=found.screens, paired=found.paired))
         leader = max(supports, key=lambda i: (supports[i], -i))
         enough, reason = geometry_support(branches[leader].selection, views.min_support)
         gains = {image: max(0, supports[image] - plain_support) for image in supports}

@@ -68,9 +68,11 @@ def decision_lines(decisions: dict[str, Any]) -> list[str]:
                      f"{views.get('decision', '')}{': ' if views.get('decision') else ''}{views['reason']}")
         for step in views.get("tried", []):
             line = f"  image {step['image']}, tilt {step['tilt']:g}: {step['views']} views"
-            if step.get("probes"):  # each view's probe: its finest level's matches consistent with one F
-                angle, best = max(step["probes"].items(), key=lambda item: item[1])
-                line += f" ({step['paired']} paired after their probes; best probe {best} consistent matches at {angle} deg)"
+            if step.get("screens") or step.get("probes"):  # matches of a view's finest level consistent with one F
+                found = [f"best {name} {count} consistent matches at {angle} deg" for name, counts in
+                         (("screen", step.get("screens")), ("probe", step.get("probes"))) if counts
+                         for angle, count in [max(counts.items(), key=lambda item: item[1])]]
+                line += f" ({step['paired']} paired after their probes; {', '.join(found)})"
             if "planes" in step:
                 angles = ", ".join(f"{count} at {angle} deg" for angle, count in step["ftheta_by_angle"].items())
                 line += f", {step['planes']} planes"
