@@ -6,7 +6,8 @@ other image's blocks, and its planes are mapped back to the original frame throu
 (``Block.level_frame``), so that expansion, tiles, the vote and the refinement see ordinary planes. The view
 takes image 0's part in Secs. 3.2-3.3 (orientation 0) and the other image is described under the planes'
 fixed orientations; the planes of image 1's views are then turned round (``BlockPlanes.swapped``) so that
-every plane maps image 0 to image 1.
+every plane maps image 0 to image 1. Where blocks are matched by whole levels, a view is probed (screened,
+then matched on its finest level) before its other levels are detected and paired (:func:`view_planes`).
 """
 
 from __future__ import annotations
