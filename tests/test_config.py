@@ -99,10 +99,10 @@ def test_dotted_slime_options_are_refused_for_a_base_alone():
     ("slime", {"views": "off", "views.min_support": 50}, "they are off"),
     ("slime", {"views": "always", "views.min_support": 50}, "the mode is 'always', which adds them all"),
     ("rootsift", {"views": "always", "views.min_inliers": 20}, "the mode is 'always'"),
-    ("slime", {"views.min_probe": 10}, r"'views.min_probe' is the probe .* Slime on hz\+ matches block pairs"),
+    ("slime", {"views.min_probe": 10}, r"'views.min_probe' sets the probe .* Slime on hz\+ matches block pairs"),
     ("aliked-lg", {"views.min_probe": 10}, r"method 'aliked-lg' runs the aliked-lg pipeline alone"),
     ("slime-aliked", {"views.min_probe": -1}, "views.min_probe"),
-    ("slime", {"views.screen_keypoints": 512}, r"'views.screen_keypoints' is the probe .* block pairs"),
+    ("slime", {"views.screen_keypoints": 512}, r"'views.screen_keypoints' sets the probe .* block pairs"),
 ])
 def test_view_options_the_run_would_not_read_are_refused(preset, options, message):
     with pytest.raises(sm.ConfigError, match=message) as info:

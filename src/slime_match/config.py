@@ -305,7 +305,7 @@ def _refuse_unread_view_option(config: MatchConfig, key: str, name: str) -> None
         if config.method != "slime" or matching != "levels":
             runs = (f"Slime on {config.base.name} matches block pairs one by one (block_matching 'pairs')"
                     if config.method == "slime" else f"method {config.method!r} runs the {config.method} pipeline alone")
-            raise ConfigError(f"{key!r} is the probe Slime runs on each view when it matches whole levels "
+            raise ConfigError(f"{key!r} sets the probe Slime runs on each view when it matches whole levels "
                               f"(block_matching 'levels'), and {runs}: drop it or set block_matching=levels")
         return
     if name not in VIEW_CRITERIA:
