@@ -25,3 +25,10 @@ def test_moved_by_a_box_corner_puts_it_at_the_origin():
     moved = Features(laf, torch.ones(2, 3), torch.ones(2)).moved((-x0, -y0))
     assert torch.equal(moved.xy, torch.tensor([[100.0 - x0, 50.0 - y0], [0.0, 0.0]]))
     assert torch.equal(moved.laf[:, :, :2], laf[:, :, :2]) and moved.shape_laf is None
+
+
+def test_strongest_features_come_highest_response_first_ties_in_index_order():
+    response = torch.tensor([0.2, 0.9, 0.5, 0.9, 0.1])
+    features = Features(torch.zeros(5, 2, 3), torch.zeros(5, 4), response)
+    assert features.strongest(3).tolist() == [1, 3, 2]
+    assert features.strongest(10).tolist() == [1, 3, 2, 0, 4]

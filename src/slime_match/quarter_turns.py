@@ -19,7 +19,6 @@ from dataclasses import asdict, dataclass
 
 import cv2
 import numpy as np
-import torch
 
 from .geometry.frames import Frame
 from .resize import resize_image
@@ -96,7 +95,7 @@ def _small(image: np.ndarray) -> np.ndarray:
 def _strongest(features: Features) -> Features:
     if len(features) <= CHECK_KEYPOINTS:
         return features
-    return features.subset(torch.argsort(features.response, descending=True)[:CHECK_KEYPOINTS])
+    return features.subset(features.strongest(CHECK_KEYPOINTS))
 
 
 def _consistent(xy0: np.ndarray, xy1: np.ndarray, seed: int) -> int:

@@ -86,6 +86,11 @@ class Features:
         shape_laf = None if self.shape_laf is None else self.shape_laf[index]
         return Features(self.laf[index], self.descriptors[index], self.response[index], shape_laf)
 
+    def strongest(self, count: int) -> torch.Tensor:
+        """(min(N, count),) indices of the features of highest detector response, highest first (ties in index
+        order)."""
+        return torch.argsort(self.response, descending=True, stable=True)[:count]
+
     def to(self, device: torch.device | str) -> Features:
         """The features on ``device``."""
         shape_laf = None if self.shape_laf is None else self.shape_laf.to(device)

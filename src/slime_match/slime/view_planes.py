@@ -16,7 +16,6 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-import torch
 
 from ..geometry.ransac import HomographyRansacConfig
 from ..pipelines import BasePipeline
@@ -109,17 +108,19 @@ def view_planes(pipeline: BasePipeline, image: np.ndarray, which: int, tilt: flo
         probe_levels = {v: (levels[0], _nearest(levels[0], other_levels)) for v, levels in zip(with_probe, found.levels)}
         screened = with_probe
         if screen_keypoints > 0:
-            small = {v: (_strongest(level, screen_keypoints), _strongest(other, screen_keypoints))
+            reduced = {id(other): _strongest(other, screen_keypoints) for _, other in probe_levels.values()}
+            small = {v: (_strongest(level, screen_keypoints), reduced[id(other)])
                      for v, (level, other) in probe_levels.items()}
             small_matches = match_level_pairs(pipeline, list(small.values()), workers)
-            counts = {v: _consistent(*pair, small_matches[level_pair_key(*pair)], seed) for v, pair in small.items()}
-            screens = {f"{angles[v]:g}": count for v, count in counts.items()}
-            screened = [v for v in with_probe if counts[v] >= SCREEN_FLOOR]
+            screen_counts = {v: _consistent(*pair, small_matches[level_pair_key(*pair)], seed)
+                             for v, pair in small.items()}
+            screens = {f"{angles[v]:g}": count for v, count in screen_counts.items()}
+            screened = [v for v in with_probe if screen_counts[v] >= SCREEN_FLOOR]
         probe_matches = match_level_pairs(pipeline, [probe_levels[v] for v in screened], workers)
-        counts = {v: _consistent(*probe_levels[v], probe_matches[level_pair_key(*probe_levels[v])], seed)
-                  for v in screened}
-        probes = {f"{angles[v]:g}": count for v, count in counts.items()}
-        chosen = [v for v in screened if counts[v] >= min_probe]
+        probe_counts = {v: _consistent(*probe_levels[v], probe_matches[level_pair_key(*probe_levels[v])], seed)
+                        for v in screened}
+        probes = {f"{angles[v]:g}": count for v, count in probe_counts.items()}
+        chosen = [v for v in screened if probe_counts[v] >= min_probe]
     rest = feature_levels(pipeline, [LevelRequest(simulated[v][0], split[v][1], detection=detection) for v in chosen],
                           workers, cache)
     all_blocks: list[Block] = []
@@ -149,12 +150,11 @@ def _strongest(level: ScaleLevel, keypoints: int) -> ScaleLevel:
     """The level reduced to its ``keypoints`` features of highest detector response (members re-indexed)."""
     if len(level.features) <= keypoints:
         return level
-    response = level.features.response.detach().cpu().numpy()
-    keep = np.sort(np.argsort(-response, kind="stable")[:keypoints])
-    index = np.full(len(response), -1, np.int64)
-    index[keep] = np.arange(len(keep))
+    keep = level.features.strongest(keypoints).sort().values  # in index order, as the level's
+    index = np.full(len(level.features), -1, np.int64)
+    index[keep.cpu().numpy()] = np.arange(len(keep))
     members = [index[m][index[m] >= 0] for m in level.members]
-    return replace(level, features=level.features.subset(torch.from_numpy(keep)), members=members)
+    return replace(level, features=level.features.subset(keep), members=members)
 
 
 def _nearest(level: ScaleLevel, others: list[ScaleLevel]) -> ScaleLevel:
