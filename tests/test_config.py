@@ -98,6 +98,9 @@ def test_dotted_slime_options_are_refused_for_a_base_alone():
     ("hz+", {"views": "off", "views.tilts": (2.0,)}, "'views.tilts' sets the simulated views, and they are off"),
     ("slime", {"views": "off", "views.min_support": 50}, "they are off"),
     ("slime", {"views": "always", "views.min_support": 50}, "the mode is 'always', which adds them all"),
+    ("aliked-lg", {"views.min_tilt": 1.2}, r"'views.min_tilt' is the threshold of Slime .* set views.min_inliers"),
+    ("slime", {"views": "always", "views.min_tilt": 1.2}, "the mode is 'always'"),
+    ("slime", {"views.min_tilt": 0.9}, r"views.min_tilt must be >= 1"),
     ("rootsift", {"views": "always", "views.min_inliers": 20}, "the mode is 'always'"),
     ("slime", {"views.min_probe": 10}, r"'views.min_probe' sets the probe .* Slime on hz\+ matches block pairs"),
     ("aliked-lg", {"views.min_probe": 10}, r"method 'aliked-lg' runs the aliked-lg pipeline alone"),
@@ -114,6 +117,7 @@ def test_view_options_the_run_reads_are_accepted():
     assert sm.make_config("hz+", views="always", **{"views.tilts": "2"}).views.tilts == (2.0,)  # the base's views
     assert sm.make_config("hz+", **{"views.min_inliers": 30}).views.min_inliers == 30
     assert sm.make_config("slime", **{"views.min_support": 80}).views.min_support == 80
+    assert sm.make_config("slime-aliked", **{"views.min_tilt": "1"}).views.min_tilt == 1.0
     assert sm.make_config("slime", views="off").views.mode == "off"
     assert sm.make_config("slime-aliked", views="always", **{"views.min_probe": 0}).views.min_probe == 0
     assert sm.make_config("slime", block_matching="levels", **{"views.min_probe": 5}).views.min_probe == 5

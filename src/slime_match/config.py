@@ -213,7 +213,8 @@ def make_config(preset: str = "auto", **options: Any) -> MatchConfig:
     and so do options the method would not read: Slime's options for a base pipeline run alone, a base
     pipeline's options for another base (``shape`` for RootSIFT), a ``threshold`` without a post-processing
     RANSAC, a ``views.*`` option with the views off, the criterion of "auto" views under "always", or the other
-    kind of method's criterion (``views.min_support`` is Slime's, ``views.min_inliers`` a base pipeline's).
+    kind of method's criterion (``views.min_support`` and ``views.min_tilt`` are Slime's, ``views.min_inliers``
+    a base pipeline's).
     """
     if not isinstance(preset, str) or (preset not in PRESETS and preset != "auto" and preset not in base_names()):
         raise ConfigError(f"unknown method/preset {preset!r}: choose auto or one of {', '.join(PRESETS)}")
@@ -289,6 +290,7 @@ def _refuse_unread(config: MatchConfig, given: dict[str, Any]) -> None:
 
 # the view options read only in mode "auto", by Slime or by a base pipeline alone: what each criterion counts
 VIEW_CRITERIA = {"min_support": ("slime", "matches of F^theta, the planes Slime's epipolar vote keeps"),
+                 "min_tilt": ("slime", "the tilt of F^theta's matches' affine map"),
                  "min_inliers": ("base", "matches consistent with one fundamental matrix")}
 
 
@@ -311,7 +313,7 @@ def _refuse_unread_view_option(config: MatchConfig, key: str, name: str) -> None
     if name not in VIEW_CRITERIA:
         return
     reader, counted = VIEW_CRITERIA[name]
-    other = next(n for n in VIEW_CRITERIA if n != name)
+    other = next(n for n, (kind, _) in VIEW_CRITERIA.items() if kind != reader)
     if (reader == "slime") != (config.method == "slime"):
         runs = "Slime" if config.method == "slime" else f"the {config.method} pipeline alone"
         raise ConfigError(f"{key!r} is the threshold of {'Slime' if reader == 'slime' else 'a base pipeline alone'} "

@@ -48,6 +48,10 @@ class ViewConfig:
             and the images' own planes decide (views that find no stronger geometry only compete with them).
             A branch under it is kept too when its views added ``min_support`` times the base pipeline's
             ``slime_view_gain`` matches to the plain F^theta (``slime.view_step``).
+        min_tilt: Slime's "auto" adds no view either when the plain F^theta is under ``min_support`` but its
+            matches' affine map (``slime.view_step.PlainTilt``, measured on 10 matches of 2 planes at least)
+            shows a tilt under this: the base matched the scene where it is not foreshortened, and what limits the matches there is
+            appearance or overlap, which views do not change (1: views whatever the tilt).
         min_inliers: a base pipeline alone adds views while fewer of its matches than this are consistent
             with one fundamental matrix (OpenCV MAGSAC++, 3 px; a base alone finds far fewer matches than
             Slime).
@@ -64,12 +68,14 @@ class ViewConfig:
     tilts: tuple[float, ...] = (2.0, 4.0)
     images: str = "both"
     min_support: int = 100
+    min_tilt: float = math.sqrt(2.0)
     min_inliers: int = 50
     min_probe: int = 25
     screen_keypoints: int = 1024
 
     def __post_init__(self) -> None:
         self.tilts = tuple(float(t) for t in self.tilts)
+        self.min_tilt = float(self.min_tilt)
         self.validate()
 
     def validate(self) -> ViewConfig:
@@ -79,6 +85,8 @@ class ViewConfig:
         check_integer("views.min_inliers", self.min_inliers, 8)
         check_integer("views.min_probe", self.min_probe, 0)
         check_integer("views.screen_keypoints", self.screen_keypoints, 0)
+        if not self.min_tilt >= 1.0:
+            raise ConfigError(f"views.min_tilt must be >= 1 (1: views whatever the matches' tilt), got {self.min_tilt}")
         if not all(t > 1.0 for t in self.tilts):
             raise ConfigError(f"views.tilts must all be > 1 (1 is the image itself), got {self.tilts}")
         return self
@@ -228,6 +236,8 @@ class ViewRecord:
             matches stay) or "dropped" (auto: no view reached the support asked for, the plain run's result is
             kept).
         reason: why the views stopped (or why none was tried), in words.
+        plain_tilt: Slime's plain F^theta's matches' tilt: their affine map's ``tilt``, how many ``matches`` it
+            holds and on how many ``planes`` (``slime.view_step.PlainTilt``); None when no map fits.
     """
 
     mode: str
@@ -235,6 +245,7 @@ class ViewRecord:
     tried: list[ViewTry] = field(default_factory=list)
     decision: str = "off"
     reason: str = "views off"
+    plain_tilt: dict[str, float] | None = None
 
     @property
     def views(self) -> int:
@@ -249,4 +260,6 @@ class ViewRecord:
     def as_dict(self) -> dict:
         out = {"mode": self.mode, "images": self.images, "tilts": self.tilts, "views": self.views,
                "decision": self.decision, "reason": self.reason}
+        if self.plain_tilt is not None:
+            out["plain_tilt"] = self.plain_tilt
         return {**out, "tried": [step.as_dict() for step in self.tried]} if self.tried else out

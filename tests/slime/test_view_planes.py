@@ -34,8 +34,9 @@ def test_slime_view_planes_hold_the_pairs_geometry(graf_small):  # noqa: F811
     result = Matcher(make_config("slime", views="always", scales=(1, 2), keep_stages=True,
                                  **{"views.tilts": (2.0,), "views.images": "image0"}, **WEIGHT_FREE))(a, b)
     views = result.summary["decisions"]["views"]
-    found, reason = views.pop("tried"), views.pop("reason")
+    found, reason, plain_tilt = views.pop("tried"), views.pop("reason"), views.pop("plain_tilt")
     assert views == {"mode": "always", "images": "image0", "tilts": [2.0], "views": 5, "decision": "kept"}
+    assert plain_tilt["tilt"] >= 1.0 and plain_tilt["matches"] >= 10 and plain_tilt["planes"] >= 2  # a plain F^theta
     assert re.fullmatch(r"every view tried; image 0's views hold the most: enough matches consistent with the "
                         r"planes' epipolar geometry \(F\^theta\): \d+ >= 100", reason), reason
     assert found[0]["support"] >= found[0]["ftheta_matches"]

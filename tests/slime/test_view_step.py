@@ -4,11 +4,14 @@ when views are tried, which image's branch is kept, and that the two images' vie
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from slime_match.slime import view_step
+from slime_match.slime.tile_sets import TileSets
 from slime_match.views import ViewConfig
 
 
@@ -83,11 +86,16 @@ def _finder(gains: dict[tuple[int, float], int], calls: list, moved: dict[tuple[
 
 
 def _run(mode: str, images: str, plain: int, gains: dict[tuple[int, float], int], gain: float = 1.0,
-         moved: dict[tuple[int, float], int] | None = None):
+         moved: dict[tuple[int, float], int] | None = None, plain_tilt: view_step.PlainTilt | None = None, **views):
     calls = []
-    state, record = view_step.add_views(_State(plain), ViewConfig(mode=mode, images=images),
-                                        _finder(gains, calls, moved or {}), select=None, gain=gain)
+    state, record = view_step.add_views(_State(plain), ViewConfig(mode=mode, images=images, **views),
+                                        _finder(gains, calls, moved or {}), select=None, gain=gain,
+                                        plain_tilt=plain_tilt)
     return state, record, calls
+
+
+def _tilt(tilt: float, matches: int, planes: int = 3) -> view_step.PlainTilt:
+    return view_step.PlainTilt(tilt, matches, planes)
 
 
 GAINS = {(0, 2.0): 20, (1, 2.0): 90, (0, 4.0): 30, (1, 4.0): 5}
@@ -96,6 +104,35 @@ GAINS = {(0, 2.0): 20, (1, 2.0): 90, (0, 4.0): 30, (1, 4.0): 5}
 def test_enough_plain_geometry_needs_no_view():
     state, record, calls = _run("auto", "both", 100, GAINS)
     assert calls == [] and state.steps == () and record.decision == "not needed" and record.tried == []
+
+
+def test_too_few_matches_that_show_no_tilt_need_no_view():
+    state, record, calls = _run("auto", "both", 60, GAINS, plain_tilt=_tilt(1.3, 46))
+    assert calls == [] and state.steps == () and record.decision == "not needed" and record.tried == []
+    assert record.reason == ("too few matches consistent with the planes' epipolar geometry (F^theta): 60 < 100; "
+                             "46 of them, on 3 planes, lie on one affine map of tilt 1.30 < 1.41 (views.min_tilt): "
+                             "the scene is not foreshortened where the images match, and views undo "
+                             "foreshortening")
+    assert record.as_dict()["plain_tilt"] == {"tilt": 1.3, "matches": 46, "planes": 3}
+
+
+@pytest.mark.parametrize(("plain_tilt", "views"), [
+    (_tilt(2.0, 46), {}),  # foreshortened where it matched: the views' first tilt undoes 1.41-2.83
+    (_tilt(1.1, view_step.TILT_MATCHES - 1), {}),  # too few matches on the map to measure a tilt
+    (_tilt(1.1, 46, planes=1), {}),  # one plane's matches: they fit an affine map whatever they are
+    (_tilt(float("nan"), 0, 0), {}),  # no affine map fits
+    (None, {}),  # not measured
+    (_tilt(1.1, 46), {"min_tilt": 1.0}),  # views whatever the tilt
+])
+def test_too_few_matches_with_a_tilt_or_none_measured_get_views(plain_tilt, views):
+    _, record, calls = _run("auto", "both", 60, GAINS, plain_tilt=plain_tilt, **views)
+    assert calls[:2] == [(0, 2.0), (1, 2.0)] and record.decision != "not needed"
+    assert ("plain_tilt" in record.as_dict()) == (plain_tilt is not None and plain_tilt.matches > 0)
+
+
+def test_always_tries_views_whatever_the_tilt():
+    _, record, calls = _run("always", "both", 60, GAINS, plain_tilt=_tilt(1.1, 46))
+    assert len(calls) == 4 and record.decision == "kept" and record.plain_tilt["tilt"] == 1.1
 
 
 def test_off_tries_nothing():
@@ -189,3 +226,25 @@ def test_always_tries_every_step_and_keeps_the_strongest_branch():
     state, record, calls = _run("always", "both", 100, GAINS)
     assert calls == [(0, 2.0), (1, 2.0), (0, 4.0), (1, 4.0)] and state.steps == (1, 1) and state.support == 195
     assert record.decision == "kept" and record.reason.startswith("every view tried; image 1's views hold the most")
+
+
+def _plain_state(xy0: np.ndarray, xy1: np.ndarray, plane_of_match: np.ndarray) -> SimpleNamespace:
+    """A plain state whose F^theta holds one tile set per plane, each of its plane's matches."""
+    planes = np.unique(plane_of_match)
+    membership = sp.csr_matrix(plane_of_match[None, :] == planes[:, None])
+    ftheta = TileSets.from_csr(membership, planes, np.zeros_like(planes), np.zeros_like(planes))
+    return SimpleNamespace(selection=SimpleNamespace(ftheta=ftheta), planes=SimpleNamespace(
+        table=SimpleNamespace(xy0=xy0, xy1=xy1)))
+
+
+def test_the_plain_tilt_counts_the_matches_and_planes_on_the_affine_map():
+    rng = np.random.default_rng(1)
+    xy0 = rng.uniform(0, 500, (50, 2))
+    xy1 = xy0 @ np.diag([1 / 1.25, 1.0]) + 20.0
+    xy1[40:] = rng.uniform(0, 500, (10, 2))  # plane 7's matches: none on the map of planes 2 and 4
+    plane_of_match = np.repeat([2, 4, 7], [20, 20, 10])
+    measured = view_step.PlainTilt.of(_plain_state(xy0, xy1, plane_of_match), (500, 500))
+    assert measured.tilt == pytest.approx(1.25, rel=1e-6) and measured.matches == 40 and measured.planes == 2
+    assert measured.measured
+    one_plane = view_step.PlainTilt.of(_plain_state(xy0[:20], xy1[:20], plane_of_match[:20]), (500, 500))
+    assert one_plane.matches == 20 and one_plane.planes == 1 and not one_plane.measured

@@ -12,15 +12,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from ..matching.delaunay import MAX_SIDE
+from .match_tilt import match_tilt
 
 __all__ = ["DTM_MAX_TILT", "DTMFrame", "dtm_frame"]
 
 DTM_MAX_TILT = 2.0  # above this tilt of the matches' affine map, image 0 is compared in image 1's frame
-AFFINE_TOLERANCE = 0.02  # RANSAC inlier distance of the global affine fit, as a fraction of image 1's diagonal
 DEGENERATE_TILT = 64.0  # a fit stretched beyond this, or on matches this elongated in image 0, is degenerate
 
 
@@ -47,26 +46,20 @@ class DTMFrame:
 
 def dtm_frame(xy0: np.ndarray, xy1: np.ndarray, size0: tuple[int, int], size1: tuple[int, int],
               max_tilt: float = DTM_MAX_TILT) -> DTMFrame:
-    """The frame for DTM on the (K, 2), (K, 2) matches of images of (H, W) ``size0`` and ``size1``.
-
-    The affine map is OpenCV's RANSAC fit (deterministic) with inliers within ``AFFINE_TOLERANCE`` of image
-    1's diagonal: a global affine map only approximates the scene, it only has to undo the stretch.
-    """
+    """The frame for DTM on the (K, 2), (K, 2) matches of images of (H, W) ``size0`` and ``size1``, from the
+    matches' robust global affine map (:func:`~.match_tilt.match_tilt`): it only has to undo the stretch."""
     own = tuple(int(s) for s in size0)
     if not np.isfinite(max_tilt) or len(xy0) < 3:
         return DTMFrame(None, own, float("nan"), "image 0's own frame")
-    tolerance = AFFINE_TOLERANCE * float(np.hypot(*size1))
     xy0 = np.asarray(xy0, np.float64)
-    affine, inliers = cv2.estimateAffine2D(xy0, np.asarray(xy1, np.float64), method=cv2.RANSAC,
-                                           ransacReprojThreshold=tolerance, maxIters=2000, confidence=0.999)
+    fit = match_tilt(xy0, xy1, size1)
+    affine, tilt = fit.affine, fit.tilt
     if affine is None:
         return DTMFrame(None, own, float("nan"), "image 0's own frame: no affine map fits the matches")
-    singular = np.linalg.svd(affine[:, :2], compute_uv=False)
-    tilt = float(singular[0] / singular[1]) if singular[1] > 0 else float("inf")
     if tilt <= max_tilt:
         return DTMFrame(None, own, tilt, f"image 0's own frame: {_stretch(tilt)}, not more than {max_tilt:g} "
                                          "(dtm_max_tilt)")
-    support = xy0[inliers.ravel() > 0]
+    support = xy0[fit.inliers]
     spread = np.linalg.svd(support - support.mean(0), compute_uv=False)
     if tilt > DEGENERATE_TILT or spread[1] * DEGENERATE_TILT < spread[0]:  # nearly on a line: any stretch fits
         return DTMFrame(None, own, tilt, "image 0's own frame: the matches lie nearly on a line, so the stretch of "

@@ -41,7 +41,7 @@ from .refine import TILE_TESTS, FlowGuide, PlaneGuide, TileMatches, final_matche
 from .selection import PlaneSelection, select_planes
 from .tile_sets import TileConfig
 from .view_planes import ViewPlanes, view_planes
-from .view_step import PlaneState, add_views
+from .view_step import PlainTilt, PlaneState, add_views
 
 logger = logging.getLogger("slime_match")
 
@@ -229,7 +229,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         return _select(found, layout, config, workers, timer)
 
     plain = PlaneState(planes, *select(planes), list(layout.blocks0), list(layout.blocks1))
-    state, record = add_views(plain, views, find, select, pipeline.slime_view_gain)
+    plain_tilt = None if views.mode == "off" else PlainTilt.of(plain, size1)
+    state, record = add_views(plain, views, find, select, pipeline.slime_view_gain, plain_tilt)
     if views.mode != "off":
         logger.info("Views: %s", record.reason)
     planes, expansion, selection = state.planes, state.expansion, state.selection

@@ -8,9 +8,14 @@ stopped. The policy, by ``ViewConfig.mode``:
 - "off": no view; the plain state.
 - "always": every tilt of every viewed image; the image whose branch gives F^theta (the planes the epipolar
   vote kept, Secs. 3.6-3.7) the most matches is kept.
-- "auto": nothing when the plain F^theta holds ``min_support`` matches. Else the first tilt of every viewed
-  image, each image's views joining that image's own branch of the plain state; the branch whose F^theta
-  holds the most matches leads. With ``gain`` = ``min_support`` times the base's ``slime_view_gain`` (1 for
+- "auto": nothing when the plain F^theta holds ``min_support`` matches, nor when fewer hold but their tilt
+  (:class:`PlainTilt`: the stretch of their affine map, measured on ``TILT_MATCHES`` matches of
+  ``TILT_PLANES`` planes at least) is under ``min_tilt`` (sqrt 2, the lower edge of the first views' range:
+  ASIFT's tilt-2 views undo tilts from sqrt 2 to 2 sqrt 2): the base then matched the scene where it is not
+  foreshortened, so what keeps its matches few is appearance or overlap, which views do not change. Without
+  such a measure (no F^theta, too few matches on one affine map, or one plane's) views are tried. Else the
+  first tilt of every viewed image, each image's views joining that image's own branch of the plain state;
+  the branch whose F^theta holds the most matches leads. With ``gain`` = ``min_support`` times the base's ``slime_view_gain`` (1 for
   the handcrafted bases; 0.35 for the learned ones, which match the same planes about three times more
   sparsely and reach fewer matches on a correct geometry), the leader is kept once the views' own planes hold
   ``gain`` of its F^theta matches and its F^theta holds ``min_support`` or ``gain`` more than the plain one
@@ -40,11 +45,15 @@ from ..views import ViewConfig, ViewRecord, ViewTry
 from .block_planes import BlockPlanes
 from .blocks import Block
 from .expansion import Expansion
+from .match_tilt import match_tilt
 from .selection import PlaneSelection
 from .tile_sets import TileSets
 from .view_planes import ViewPlanes
 
-__all__ = ["PlaneState", "add_views", "geometry_support"]
+__all__ = ["TILT_MATCHES", "TILT_PLANES", "PlainTilt", "PlaneState", "add_views", "geometry_support"]
+
+TILT_MATCHES = 10  # F^theta matches on one affine map that measure a tilt: of up to 100 random matches, 8 at most fit one
+TILT_PLANES = 2  # planes those matches come from: one plane's matches fit an affine map whatever they are
 
 
 @dataclass
@@ -67,6 +76,32 @@ class PlaneState:
         viewed += found.blocks
         planes = self.planes.joined(found.planes, *((offset, 0) if found.image == 0 else (0, offset)))
         return PlaneState(planes, *select(planes), blocks0, blocks1)
+
+
+@dataclass(frozen=True)
+class PlainTilt:
+    """The tilt of the plain F^theta's matches: their affine map's larger over smaller singular value (nan
+    when none fits), how many of the matches it holds and on how many planes of F^theta they lie."""
+
+    tilt: float
+    matches: int
+    planes: int
+
+    @classmethod
+    def of(cls, state: PlaneState, size1: tuple[int, int]) -> PlainTilt:
+        """The tilt of ``state``'s F^theta (:func:`~.match_tilt.match_tilt`), image 1 of (H, W) ``size1``."""
+        ftheta, table = state.selection.ftheta, state.planes.table
+        matches = np.flatnonzero(ftheta.union())
+        fit = match_tilt(table.xy0[matches], table.xy1[matches], size1)
+        on_map = np.zeros(ftheta.n_matches, bool)
+        on_map[matches[fit.inliers]] = True
+        planes = np.unique(ftheta.plane[ftheta.set_of_entry[on_map[ftheta.indices]]])
+        return cls(fit.tilt, fit.support, len(planes))
+
+    @property
+    def measured(self) -> bool:
+        """Whether the tilt is the scene's: ``TILT_MATCHES`` on the affine map, from ``TILT_PLANES`` planes."""
+        return self.matches >= TILT_MATCHES and self.planes >= TILT_PLANES
 
 
 def _support(selection: PlaneSelection) -> int:
@@ -94,7 +129,7 @@ def geometry_support(selection: PlaneSelection, min_support: int) -> tuple[bool,
 
 def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float], ViewPlanes],
               select: Callable[[BlockPlanes], tuple[Expansion, PlaneSelection]],
-              gain: float = 1.0) -> tuple[PlaneState, ViewRecord]:
+              gain: float = 1.0, plain_tilt: PlainTilt | None = None) -> tuple[PlaneState, ViewRecord]:
     """The views step under the module's policy.
 
     Args:
@@ -104,6 +139,7 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
         select: Secs. 3.4-3.7 on block planes (expansion, then the selection of F^theta).
         gain: the fraction of ``views.min_support`` that a branch's views must add to the plain F^theta to be
             kept under ``views.min_support`` (the base pipeline's ``slime_view_gain``).
+        plain_tilt: the tilt of the plain F^theta's matches; None: not measured (views as without a tilt).
 
     Returns:
         The state to continue from (the plain one, or one image's branch) and what was tried, decided and why.
@@ -114,8 +150,17 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
     enough, record.reason = geometry_support(plain.selection, views.min_support)
     plain_support = _support(plain.selection)
     min_gain = math.ceil(gain * views.min_support)
+    if plain_tilt is not None and np.isfinite(plain_tilt.tilt):
+        record.plain_tilt = {"tilt": round(plain_tilt.tilt, 3), "matches": plain_tilt.matches,
+                             "planes": plain_tilt.planes}
     if views.mode == "auto" and enough:
         record.decision = "not needed"
+        return plain, record
+    if views.mode == "auto" and plain_tilt is not None and plain_tilt.measured and plain_tilt.tilt < views.min_tilt:
+        record.decision = "not needed"
+        record.reason += (f"; {plain_tilt.matches} of them, on {plain_tilt.planes} planes, lie on one affine map of "
+                          f"tilt {plain_tilt.tilt:.2f} < {views.min_tilt:.2f} (views.min_tilt): the scene is not "
+                          "foreshortened where the images match, and views undo foreshortening")
         return plain, record
     branches: dict[int, PlaneState] = {}
     supports: dict[int, int] = {}  # per image: the distinct matches of its branch's F^theta
