@@ -50,8 +50,8 @@ class ViewConfig:
             ``slime_view_gain`` matches to the plain F^theta (``slime.view_step``).
         min_tilt: Slime's "auto" adds no view either when the plain F^theta is under ``min_support`` but its
             matches' affine map (``slime.view_step.PlainTilt``, measured on 10 matches of 2 planes at least)
-            shows a tilt under this: the base matched the scene where it is not foreshortened, and what limits the matches there is
-            appearance or overlap, which views do not change (1: views whatever the tilt).
+            shows a tilt under this: the base matched the scene where it is not foreshortened, and what limits
+            the matches there is appearance or overlap, which views do not change (1: views whatever the tilt).
         min_inliers: a base pipeline alone adds views while fewer of its matches than this are consistent
             with one fundamental matrix (OpenCV MAGSAC++, 3 px; a base alone finds far fewer matches than
             Slime).

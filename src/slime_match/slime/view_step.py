@@ -15,17 +15,16 @@ stopped. The policy, by ``ViewConfig.mode``:
   foreshortened, so what keeps its matches few is appearance or overlap, which views do not change. Without
   such a measure (no F^theta, too few matches on one affine map, or one plane's) views are tried. Else the
   first tilt of every viewed image, each image's views joining that image's own branch of the plain state;
-  the branch whose F^theta holds the most matches leads. With ``gain`` = ``min_support`` times the base's ``slime_view_gain`` (1 for
-  the handcrafted bases; 0.35 for the learned ones, which match the same planes about three times more
-  sparsely and reach fewer matches on a correct geometry), the leader is kept once the views' own planes hold
-  ``gain`` of its F^theta matches and its F^theta holds ``min_support`` or ``gain`` more than the plain one
-  (matches the views only moved onto the images' own planes, through the vote, are no sign that the views
-  found the scene's geometry); until then the next tilt
-  continues every branch whose views added at least half the matches the leader's added to the plain
-  F^theta (a lead within a factor of two is noise, not a sign of which image the scene's tilt compresses;
-  every branch when the leader's views added none).
-  When no branch reaches it, the plain state is kept (views that found no stronger geometry would only
-  compete with the images' own planes).
+  the branch whose F^theta holds the most matches leads. With ``gain`` = ``min_support`` times the base's
+  ``slime_view_gain`` (1 for the handcrafted bases; 0.35 for the learned ones, which match the same planes
+  about three times more sparsely and reach fewer matches on a correct geometry), the leader is kept once the
+  views' own planes hold ``gain`` of its F^theta matches and its F^theta holds ``min_support`` or ``gain``
+  more than the plain one (matches the views only moved onto the images' own planes, through the vote, are no
+  sign that the views found the scene's geometry); until then the next tilt continues every branch whose
+  views added at least half the matches the leader's added to the plain F^theta (a lead within a factor of
+  two is noise, not a sign of which image the scene's tilt compresses; every branch when the leader's views
+  added none). When no branch reaches it, the plain state is kept (views that found no stronger geometry
+  would only compete with the images' own planes).
 
 Why branches: a scene's tilt is undone by compressing one image or the other, so the two images' view planes
 are never pooled (the wrong image's views would only add planes that compete with the right one's in the
