@@ -9,8 +9,12 @@ CPU and compares with ``data/identical_matches.json``:
   threshold can fall the other side on another CPU (graf's plane memberships: 1,812,933 on one x86-64 CPU,
   1,813,725 on another, 0.04% apart, with the same final matches), and a stage array whose length moved
   that way is compared by its length alone;
+* the final matches in one order, by their keypoints: they come sorted by score, and where two scores nearly
+  tie their order flips between CPUs (the keypoints agree to the bit on two x86-64 CPUs, the scores, float32
+  descriptor distances, to about 1e-5);
 * within a tolerance, the floats (keypoints, scores, the float stage arrays): a fingerprint of each array (its
-  shape, non-finite counts, its sum and projections on fixed random sign vectors, 65 of its values at evenly
+  shape, non-finite counts, its sum and projections on fixed pseudo-random sign vectors (a hash of the
+  position, not a random generator whose stream may change between numpy releases), 65 of its values at evenly
   spaced positions and 65 order statistics) agrees to ``FLOAT_RTOL`` of the array's scale. Float results
   differ in their last bits between CPUs (vector units sum in different orders; float32 descriptor distances
   keep about 5 significant digits); the tolerance is above that, and a shift of every keypoint by a
@@ -92,6 +96,19 @@ def digest(array: np.ndarray) -> str:
     return hashlib.sha256(f"{array.shape}{array.dtype}".encode() + array.tobytes()).hexdigest()[:24]
 
 
+def _signs(n: int) -> np.ndarray:
+    """(N_PROJECTIONS, n) fixed pseudo-random signs +-1, the same on every platform and numpy version (a random
+    generator's stream may change between numpy releases): the low bit of a SplitMix64 hash of each
+    (projection, position)."""
+    with np.errstate(over="ignore"):
+        z = (np.arange(n, dtype=np.uint64)[None, :] + np.uint64(1)) * np.uint64(0x9E3779B97F4A7C15)
+        z = z + np.arange(1, N_PROJECTIONS + 1, dtype=np.uint64)[:, None] * np.uint64(0xD1B54A32D192ED03)
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        z = z ^ (z >> np.uint64(31))
+    return np.where(z & np.uint64(1), 1.0, -1.0)
+
+
 def fingerprint(array: np.ndarray) -> dict:
     """What the fixture keeps of an array: a digest of a discrete one, a float one's sketch (see module doc)."""
     array = np.asarray(array)
@@ -100,7 +117,7 @@ def fingerprint(array: np.ndarray) -> dict:
     x = array.astype(np.float64).ravel()
     nonfinite = [int(np.isnan(x).sum()), int(np.isposinf(x).sum()), int(np.isneginf(x).sum())]
     x = np.where(np.isfinite(x), x, 0.0)
-    signs = np.random.default_rng(len(x)).integers(0, 2, (N_PROJECTIONS, len(x))) * 2.0 - 1.0
+    signs = _signs(len(x))
     positions = np.linspace(0, len(x) - 1, N_VALUES).astype(int) if len(x) else np.zeros(0, int)
     return {"shape": list(array.shape), "nonfinite": nonfinite, "norm": float(np.linalg.norm(x)),
             "max_abs": float(np.abs(x).max(initial=0.0)), "sums": [float(x.sum()), *(signs @ x).tolist()],
@@ -133,7 +150,10 @@ def outputs(case: str) -> dict:
     """What a case's run gives: matches count, fingerprints of the outputs, the stage counts."""
     images, preset, options = CASES[case]
     result = Matcher(make_config(preset, device="cpu", **options))(*load_pair(images))
-    arrays = {"keypoints0": result.keypoints0, "keypoints1": result.keypoints1, "scores": result.scores}
+    order = np.lexsort((result.keypoints1[:, 1], result.keypoints1[:, 0], result.keypoints0[:, 1],
+                        result.keypoints0[:, 0]))  # by keypoints: the score order flips where scores nearly tie
+    arrays = {"keypoints0": result.keypoints0[order], "keypoints1": result.keypoints1[order],
+              "scores": result.scores[order]}
     arrays.update({f"stages.{k}": v for k, v in sorted((result.stages or {}).items())})
     return {"matches": len(result), "arrays": {k: fingerprint(v) for k, v in arrays.items()},
             "counts": result.summary.get("counts", {})}
