@@ -6,15 +6,16 @@
 #
 #   benchmarks/run_results.sh [extra slime-bench options, e.g. --device cuda]
 #
-# About 75 minutes on 2 CPU cores (15 hard pairs and 46 planar and non-planar pairs; the Slime presets take
-# 10-40 s a pair and up to 110 s where simulated views are tried); run it on a quiet machine, as the report
+# About two hours on 2 CPU cores (15 hard pairs and 46 planar and non-planar pairs; the Slime presets take
+# 10-40 s a pair and up to 110 s where simulated views are tried, Slime on DISK about 2 minutes a pair, DISK
+# alone about one); run it on a quiet machine, as the report
 # gives seconds per pair. Resumable: predictions are cached in $OUT/predictions and $OUT_HARD/predictions
 # with the code version that computed them, so an interrupted run continues where it stopped and a rerun
 # only recomputes metrics. Every method runs at its default settings; the main table gives each method at
 # its best post-processing RANSAC threshold, stated in its column.
 # Environment: OUT (results folder, default results/full), OUT_HARD (default results/hard), METHODS and
-# HARD_METHODS (';'-separated method specs; the learned bases, aliked-lg and slime-aliked by default, need
-# their weights in TORCH_HOME: scripts/fetch_learned_weights.py; add e.g. slime-keynet;keynet;slime-upright
+# HARD_METHODS (';'-separated method specs; the learned bases, ALIKED, DISK and XFeat alone and under Slime
+# by default, need their weights in TORCH_HOME: scripts/fetch_learned_weights.py; add e.g. slime-keynet;keynet;slime-upright
 # to METHODS for the other bases), ROTATIONS (default 90), DATA (data folder, default $SLIME_MATCH_DATA or
 # ../shared/data), TORCH_HOME (network weights).
 set -euo pipefail
@@ -27,7 +28,7 @@ OUT="${OUT:-results/full}"
 OUT_HARD="${OUT_HARD:-results/hard}"
 METHODS="${METHODS:-slime;hz+;slime-rootsift;rootsift;opencv-sift;aliked-lg;slime-aliked}"
 ROTATIONS="${ROTATIONS:-90}"
-HARD_METHODS="${HARD_METHODS:-slime;slime:views=off;hz+;asift;opencv-sift:rootsift=true,mutual=true;aliked-lg;slime-aliked}"
+HARD_METHODS="${HARD_METHODS:-slime;slime:views=off;hz+;asift;opencv-sift:rootsift=true,mutual=true;aliked-lg;slime-aliked;disk-lg;slime:base=disk-lg,max_keypoints=3072,views=off;xfeat-lg;slime:base=xfeat-lg,max_keypoints=3072,views=off}"
 python -m slime_match.eval.bench "evd:$DATA/hard/evd" "wxbs:$DATA/hard/wxbs" --thresholds none --map-pairs 0 \
     --seed 0 --methods "$HARD_METHODS" -o "$OUT_HARD" "$@"
 python -m slime_match.eval.bench graf hpatches scannet-sample motorcycle --data-root "$DATA" \
