@@ -30,7 +30,8 @@ EVD = {  # extreme viewpoints: adam and shop are solved by the image's own plane
     "evd/shop": {"correct": 615, "precision": 0.911, "maa": 1.0},
     # image 1's views; without views: 12, mAA 0. Dum's protocol mAA moves between CPUs as between seeds (0.60,
     # 399 correct, on the CPU of the other gates; 0.47 / 0.53 / 0.53, 441 / 423 / 379 correct, at seeds 0 / 1 / 2
-    # on an AMD EPYC): its gate takes the lowest of those runs
+    # on an AMD EPYC, each `predict` + `evaluate_protocol` as measure() runs them, with make_method(SLIME,
+    # seed=S)): its gate takes the lowest of those runs
     "evd/dum": {"correct": 379, "precision": 0.455, "maa": 0.467},
 }
 WXBS = {  # wide baseline with appearance and lighting change; mAA = mean recall of the GT correspondences
