@@ -245,7 +245,7 @@ def bench_ablation(label: str, options: dict, pair, device: str, default_record:
 
 def bench_learned_base(pair, device: str, default_record: dict) -> dict:
     """ALIKED + LightGlue alone (which loads the networks) then Slime on it, next to the default Slime run of the
-    same pair."""
+    same pair; then Slime on it with DISK's planes pooled (``slime-aliked-disk``, timed after one untimed call)."""
     base = run_matcher(Matcher(make_config("aliked-lg", device=device)), pair)
     slime = run_matcher(Matcher(make_config("slime-aliked", device=device)), pair)
     out = {"preset": "slime-aliked", "slime": slime, "base": base,
@@ -253,6 +253,13 @@ def bench_learned_base(pair, device: str, default_record: dict) -> dict:
            "over_default_slime_time": round(slime["wall_s"] / max(default_record["wall_s"], 1e-9), 2)}
     _print_comparison("Slime on ALIKED + LightGlue (slime-aliked) 640x480, base aliked-lg", out)
     print(f"slime-aliked / default Slime time: {out['over_default_slime_time']:.2f}x")
+    pooled_matcher = Matcher(make_config("slime-aliked-disk", device=device), feature_cache_mb=0)
+    pooled_matcher(*pair[:2])  # untimed: DISK's first call
+    pooled = run_matcher(pooled_matcher, pair)
+    out["pooled_disk"] = pooled
+    out["pooled_over_slime_time"] = round(pooled["wall_s"] / max(slime["wall_s"], 1e-9), 2)
+    print(f"slime-aliked-disk (DISK's planes pooled): {pooled['wall_s']:.1f} s, {out['pooled_over_slime_time']:.2f}x "
+          f"slime-aliked; {pooled['counts'].get('pooled_planes')} pooled planes")
     return out
 
 
@@ -315,8 +322,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--skip-ablation", action="store_true",
                         help="skip the block and tile detection ablation (minutes on a CPU)")
     parser.add_argument("--learned", action="store_true",
-                        help="also ALIKED + LightGlue alone and Slime on it (slime-aliked) at 640x480 (their weights "
-                             "in TORCH_HOME)")
+                        help="also ALIKED + LightGlue alone, Slime on it (slime-aliked) and with DISK's planes pooled "
+                             "(slime-aliked-disk) at 640x480 (their weights in TORCH_HOME)")
     args = parser.parse_args(argv)
     if args.device == "cuda" and not torch.cuda.is_available():
         raise SystemExit("--device cuda: no CUDA device available")

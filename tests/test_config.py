@@ -125,6 +125,26 @@ def test_view_options_the_run_reads_are_accepted():
     assert with_options(recorded, views="auto", **{"views.min_support": 90}).views.min_support == 90
 
 
+@pytest.mark.parametrize(("preset", "options", "message"), [
+    ("hz+", {"pool": "rootsift"}, "pool is a Slime option, but method 'hz\\+' runs the hz\\+ pipeline alone"),
+    ("slime", {"pool": "hz+"}, "pool 'hz\\+' is the base itself"),
+    ("slime", {"pool": "sift"}, "invalid pool .sift.: choose one of .*disk-lg"),
+    ("slime-aliked", {"descriptor": "tfeat"}, "the aliked-lg base pipeline does not use 'descriptor'"),
+    ("slime-aliked-disk", {"descriptor": "tfeat"}, "the aliked-lg and disk-lg base pipelines do not use 'descriptor'"),
+])
+def test_a_pooled_base_is_checked(preset, options, message):
+    with pytest.raises(sm.ConfigError, match=message):
+        sm.make_config(preset, **options)
+
+
+def test_a_pooled_base_reads_the_base_options():
+    config = sm.make_config("slime-aliked-disk")
+    assert (config.base.name, config.slime.pool, config.base.max_keypoints) == ("aliked-lg", "disk-lg", 3072)
+    # Hz+ pooled under ALIKED reads the descriptor, which ALIKED does not
+    assert sm.make_config("slime-aliked", pool="hz+", descriptor="tfeat").base.descriptor == "tfeat"
+    assert sm.make_config("slime", pool="rootsift").slime.pool == "rootsift"
+
+
 def test_a_summary_reads_back_to_the_same_configuration(tmp_path):
     config = sm.make_config("slime-rootsift", scales=(1, 2), workers=1, **{"slime.tiles.t_xi": 12})
     summary = {"method": "slime", "config": json.loads(json.dumps(config.to_dict())), "counts": {}}

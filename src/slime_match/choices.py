@@ -16,8 +16,8 @@ LEARNED_BASES = ("aliked-lg", "aliked-nn", "disk-lg", "disk-nn", "xfeat-lg", "xf
 ALIKED_MODELS = ("n16", "n16rot", "n32")
 # the presets of ``make_config`` and ``slime match --method`` (``config.PRESETS`` holds their settings)
 PRESET_NAMES = ("slime", "slime-upright", "slime-rootsift", "slime-fast", "slime-fine", "slime-keynet",
-                "slime-keynet-upright", "slime-aliked", "hz+", "hz+-upright", "rootsift", "rootsift-upright",
-                "keynet", "keynet-upright", *LEARNED_BASES)
+                "slime-keynet-upright", "slime-aliked", "slime-aliked-disk", "hz+", "hz+-upright", "rootsift",
+                "rootsift-upright", "keynet", "keynet-upright", *LEARNED_BASES)
 METHOD_CHOICES = ("auto", *PRESET_NAMES)  # "auto": the best preset whose weights are available (auto_method)
 
 SHAPE_METHODS = ("affnet", "baumberg")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 import logging
 import time
 from typing import Any
@@ -20,13 +21,14 @@ from .features.descriptors import AUTO_ORDER, resolve_descriptor
 from .geometry.backends import estimate_geometry
 from .geometry.frames import Frame
 from .io import MIN_IMAGE_SIDE, ImageLike, load_image
-from .pipelines import PIPELINES, make_base_pipeline
+from .pipelines import PIPELINES, BaseConfig, make_base_pipeline
 from .pipelines.view_matching import match_views
 from .quarter_turns import check_quarter_turns, turned_frame
 from .resize import pair_factors, resize_image
 from .result import MatchResult
 from .slime.level_cache import LevelCache
 from .slime.pipeline import run_slime, stages_to_original
+from .slime.pooled_base import PooledBase
 
 logger = logging.getLogger("slime_match")
 
@@ -54,7 +56,8 @@ class Matcher:
         """Args:
             config: the configuration (``make_config()``'s default when None); a copy is kept.
             feature_cache_mb: memory (MiB) for Slime's block and tile features of the images matched last,
-                reused when a later pair shares an image (the matches are the same); 0 turns it off.
+                reused when a later pair shares an image (the matches are the same); 0 turns it off. A pooled
+                second base (``slime.pool``) gets as much again for its block features.
         """
         if not feature_cache_mb >= 0:  # NaN too
             raise ConfigError(f"feature_cache_mb must be >= 0 MiB, got {feature_cache_mb}")
@@ -69,6 +72,18 @@ class Matcher:
         elif self.config.auto_choice:
             logger.info(self.config.auto_choice)
         base = self.config.base
+        self._resolve_descriptor(base)
+        self.pipeline = make_base_pipeline(base, self.device)
+        self.pooled = None  # Slime's second base (``slime.pool``), with the base's options
+        if self.config.method == "slime" and self.config.slime.pool is not None:
+            pool_base = dataclasses.replace(base, name=self.config.slime.pool)
+            self._resolve_descriptor(pool_base)
+            self.pooled = PooledBase(make_base_pipeline(pool_base, self.device),
+                                     LevelCache(int(feature_cache_mb * 2**20)) if feature_cache_mb > 0 else None)
+
+    def _resolve_descriptor(self, base: BaseConfig) -> None:
+        """Set a descriptor "auto" of a base that reads one to the best available (a warning names what it
+        passed over)."""
         if "descriptor" in PIPELINES[base.name].options and base.descriptor == "auto":
             # Key.Net's pipeline describes with networks only
             candidates = AUTO_ORDER[:-1] if base.name == "keynet" else AUTO_ORDER
@@ -76,7 +91,6 @@ class Matcher:
             if warning:
                 logger.warning(warning)
                 self.warnings.append(warning)
-        self.pipeline = make_base_pipeline(base, self.device)
 
     def __repr__(self) -> str:
         """One line: the method and the choices that most change its results and speed."""
@@ -84,6 +98,8 @@ class Matcher:
         text = f"Matcher(method={config.method!r}"
         if config.method == "slime":
             text += f", base={base.name!r}, scales={config.slime.blocks.scales}"
+            if config.slime.pool is not None:
+                text += f", pool={config.slime.pool!r}"
         for key in ("shape", "orientation", "descriptor"):
             if key in self.pipeline.options and not (key == "orientation" and base.upright):
                 text += f", {key}={getattr(base, key)!r}"
@@ -123,7 +139,7 @@ class Matcher:
             decisions["quarter_turns"] = turn.as_dict()
         if config.method == "slime":
             output = run_slime(self.pipeline, array0, array1, config.slime, timer, seed=config.seed,
-                               level_cache=self.level_cache, views=config.views)
+                               level_cache=self.level_cache, views=config.views, pooled=self.pooled)
             xy0, xy1, scores, counts, stages = output.xy0, output.xy1, output.scores, output.counts, output.stages
             warnings += output.warnings
             decisions |= output.decisions

@@ -207,3 +207,26 @@ def test_layout_arrays_are_the_cores_in_original_pixels():
     # scale 1: 192 px at 0.4x
     np.testing.assert_array_equal(arrays["blocks0"][0], [-0.5, -0.5, 479.5, 479.5, 0])
     assert set(arrays["blocks1"][:, 4].tolist()) == {0.0, 1.0, 2.0}
+
+
+def test_a_pooled_base_adds_its_own_block_planes(graf_small):
+    """Slime on Hz+ with RootSIFT pooled (``pool="rootsift"``): the block planes are exactly those of Slime on
+    Hz+ followed by those of Slime on RootSIFT, whose matches lie on the GT homography, and the final matches
+    stay right."""
+    a, b, h = graf_small
+    alone = {name: Matcher(make_config(preset, views="off", **options))(a, b).summary["counts"]
+             for name, preset, options in (("hz+", "slime", WEIGHT_FREE), ("rootsift", "slime-rootsift", {}))}
+    pooled = Matcher(make_config("slime", pool="rootsift", views="off", keep_stages=True, **WEIGHT_FREE))(a, b)
+    counts = pooled.summary["counts"]
+    assert counts["pooled_planes"] == alone["rootsift"]["block_planes"] > 0
+    assert counts["block_planes"] == alone["hz+"]["block_planes"] + alone["rootsift"]["block_planes"]
+    assert pooled.summary["decisions"]["pool"] == (f"rootsift: {counts['pooled_planes']} block planes pooled with "
+                                                   f"the base's {alone['hz+']['block_planes']}")
+    # the pooled planes' own matches lie on the GT homography (within 15 px)
+    xy0, xy1, plane = (pooled.stages[f"block_matches_{key}"] for key in ("xy0", "xy1", "plane"))
+    first = counts["block_planes"] - counts["pooled_planes"]
+    right = [np.mean(np.linalg.norm(project(h, xy0[plane == p])[0] - xy1[plane == p], axis=1) < 15)
+             for p in range(first, counts["block_planes"])]
+    assert np.percentile(right, 10) >= 0.9, np.percentile(right, 10)
+    ok = correct_matches_homography(pooled.keypoints0, pooled.keypoints1, h)
+    assert ok.sum() > 100 and ok.mean() >= 0.9, (int(ok.sum()), ok.mean())

@@ -292,6 +292,7 @@ def test_the_decisions_of_a_run_read_as_lines():
                         "ftheta_by_angle": {"0": 100, "36": 40}}]}
     lines = decision_lines({"method": "slime-aliked (its weights are cached)", "views": views, "vote": "consensus",
                             "vote_reason": "3 homographies share F", "detection": "scale", "block_matching": "levels",
+                            "pool": "disk-lg: 84 block planes pooled with the base's 49",
                             "global_dtm": "image 0's own frame"})
     assert lines == [
         "method: slime-aliked (its weights are cached)",
@@ -303,6 +304,7 @@ def test_the_decisions_of_a_run_read_as_lines():
          "in F^theta (100 at 0 deg, 40 at 36 deg)"),
         "epipolar vote: consensus (3 homographies share F)",
         "blocks: scale detection, matched by levels",
+        "pooled base: disk-lg: 84 block planes pooled with the base's 49",
         "final DTM: image 0's own frame",
     ]
     assert decision_lines({}) == []

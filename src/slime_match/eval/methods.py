@@ -178,6 +178,7 @@ REGISTRY: dict[str, tuple[str, Callable[..., MethodFn]]] = {
     "slime-keynet": ("Slimed Key.Net", _preset("slime-keynet")),
     "slime-keynet-upright": ("Slimed Key.Net (upright)", _preset("slime-keynet-upright")),
     "slime-aliked": ("Slimed ALIKED + LightGlue", _preset("slime-aliked")),
+    "slime-aliked-disk": ("Slimed ALIKED + LightGlue, DISK pooled", _preset("slime-aliked-disk")),
     "opencv-sift": ("OpenCV SIFT", lambda **o: OpenCVSift(**o)),
     "asift": ("OpenCV ASIFT", lambda **o: OpenCVAsift(**o)),
     "loftr": ("LoFTR", lambda **o: KorniaLoFTR(**o)),

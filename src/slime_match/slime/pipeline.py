@@ -4,6 +4,7 @@ its own, with its counts.
 Stages and where they live:
     3.1 blocks and tiles ............ :mod:`.blocks`; their features: :mod:`.levels` (:mod:`.level_cache`)
     3.2-3.3 block planes ............ :mod:`.block_planes` (:mod:`.fixed_descriptors`, :mod:`.jobs`)
+    a second base's planes (ours) ... :mod:`.pooled_base` (they join the block planes)
     simulated views (ours) .......... :mod:`.view_step`, :mod:`.view_planes` (their planes join the block planes)
     3.4 expansion and pruning ....... :mod:`.expansion`
     3.5 tile sets ................... :mod:`.tile_sets`
@@ -37,6 +38,7 @@ from .expansion import Expansion, PlaneConfig, expand_planes
 from .fixed_descriptors import FixedDescriptors
 from .level_cache import LevelCache, feature_levels
 from .levels import DETECTIONS, LevelRequest
+from .pooled_base import PooledBase
 from .refine import TILE_TESTS, FlowGuide, PlaneGuide, TileMatches, final_matches, match_tiles, tile_test
 from .selection import PlaneSelection, select_planes
 from .tile_sets import TileConfig
@@ -89,6 +91,10 @@ class SlimeConfig:
             where the plane holds, not only near the block matches; ours, the default: more coverage on
             planar and hard pairs, docs/coverage.md); "flow", the paper's (a match of F^theta within t_perp
             at both ends).
+        pool: a second registered base pipeline (e.g. "disk-lg" under an ALIKED base) whose block planes join
+            the base's before Sec. 3.4 (:mod:`.pooled_base`); it runs with the base's options, those it reads,
+            and its own detection and block matching; views, tiles and the final matches stay the base's.
+            None: the base alone.
     """
 
     blocks: BlockConfig = field(default_factory=BlockConfig)
@@ -106,6 +112,7 @@ class SlimeConfig:
     tile_detection: str = "scale"
     block_matching: str | None = None
     tile_test: str = "plane"
+    pool: str | None = None
 
     def __post_init__(self) -> None:
         self.validate()
@@ -123,6 +130,8 @@ class SlimeConfig:
         if self.block_matching is not None:
             check_choice("block_matching", self.block_matching, BLOCK_MATCHINGS)
         check_choice("tile_test", self.tile_test, TILE_TESTS)
+        if self.pool is not None and not isinstance(self.pool, str):
+            raise ConfigError(f"pool must name a base pipeline (e.g. 'disk-lg') or be None, got {self.pool!r}")
         return self
 
 
@@ -165,7 +174,7 @@ class Layout:
 
 def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, config: SlimeConfig,
               timer: StageTimer | None = None, seed: int = 0, level_cache: LevelCache | None = None,
-              views: ViewConfig | None = None) -> SlimeOutput:
+              views: ViewConfig | None = None, pooled: PooledBase | None = None) -> SlimeOutput:
     """Run Slime on two (H, W, 3) float images with ``pipeline`` as the base.
 
     Args:
@@ -174,6 +183,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         views: simulated views (:class:`~slime_match.views.ViewConfig`); None: off. Their planes join the
             block planes before Sec. 3.4 (:mod:`.view_step`: "auto" adds them, tilt after tilt and each image's
             views a branch of its own, only while the plane selection finds too little consistent geometry).
+        pooled: the second base of ``config.pool``, whose block planes join the base's; None: the base alone.
 
     Returns:
         SlimeOutput with matches in original pixels sorted by score (lower is better).
@@ -198,6 +208,8 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
             warn(message)
     if workers > 1:  # loaded once here, the forked workers of every stage inherit the compiled loops
         pipeline.load_kernels()
+        if pooled is not None:
+            pooled.pipeline.load_kernels()
         warm_up("ransac")
     with timer("features"):  # the tiles' regions too (Sec. 3.8), so that all detections share the workers
         detection = config.detection or pipeline.slime_detection
@@ -213,6 +225,15 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         planes = block_planes(pipeline, *features.levels[:2], layout.blocks0, layout.blocks1, config.ransac,
                               bins=config.bins, min_matches=config.min_plane_matches, seed=seed, workers=workers,
                               fixed=fixed, matching=matching)
+    pool_decision = None
+    if pooled is not None:
+        with timer("pooled_base"):
+            pool_planes = pooled.block_planes(image0, image1, layout.blocks0, layout.blocks1, config.ransac, config.bins,
+                                              config.min_plane_matches, seed, workers)
+        pool_decision = (f"{pooled.pipeline.name}: {len(pool_planes.H)} block planes pooled with the base's "
+                         f"{len(planes.H)}")
+        logger.info("Pooled base %s", pool_decision)
+        planes = planes.joined(pool_planes, 0, 0)  # the same blocks: no block index moves
     images = image0, image1
 
     def find(image: int, tilt: float) -> ViewPlanes:
@@ -264,10 +285,14 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         for image, blocks in enumerate((state.blocks0, state.blocks1)):
             stages.update(_plane_blocks(planes.level_matches.pairs[:, image], blocks, image))
     counts["views"] = record.views
+    if pooled is not None:
+        counts["pooled_planes"] = len(pool_planes.H)
     decisions = {"vote": selection.vote, "vote_reason": selection.vote_reason, "views": record.as_dict(),
                  "detection": detection, "block_matching": matching}
     if final.dtm_frame:
         decisions["global_dtm"] = final.dtm_frame
+    if pool_decision:
+        decisions["pool"] = pool_decision
     return SlimeOutput(final.xy0, final.xy1, final.scores, counts, stages, warnings, decisions)
 
 

@@ -56,7 +56,7 @@ def matches_payload(folder: Path) -> dict[str, Any]:
 def decision_lines(decisions: dict[str, Any]) -> list[str]:
     """``summary.json``'s ``decisions`` in words, one line each: the method ``auto`` took, the quarter turn,
     the simulated views (the decision and why, then each step tried), Slime's epipolar vote, its block detection
-    and matching, and the frame of its final DTM."""
+    and matching, the planes of a pooled second base, and the frame of its final DTM."""
     lines = []
     if "method" in decisions:
         lines.append(f"method: {decisions['method']}")
@@ -86,6 +86,8 @@ def decision_lines(decisions: dict[str, Any]) -> list[str]:
         lines.append(f"epipolar vote: {decisions['vote']} ({decisions['vote_reason']})")
     if "detection" in decisions:
         lines.append(f"blocks: {decisions['detection']} detection, matched by {decisions['block_matching']}")
+    if "pool" in decisions:
+        lines.append(f"pooled base: {decisions['pool']}")
     if "global_dtm" in decisions:
         lines.append(f"final DTM: {decisions['global_dtm']}")
     return lines
