@@ -191,7 +191,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     # as with 8000 keypoints, at 1.8x instead of 2.6x the time of `slime` on graf (docs/evaluation.md)
     "slime-aliked": {"method": "slime", "base": "aliked-lg", "aliked_threshold": 0.0, "max_keypoints": 3072},
     # the same with DISK's block planes pooled in (the same keypoints per block scale): more wide-baseline
-    # block pairs found (WxBS mAA 0.62 over three seeds against 0.57) at about twice the time (docs/evaluation.md)
+    # block pairs found (WxBS mAA 0.62 over three seeds against 0.57) at 1.4-2x the time (docs/evaluation.md)
     "slime-aliked-disk": {"method": "slime", "base": "aliked-lg", "aliked_threshold": 0.0, "max_keypoints": 3072,
                           "pool": "disk-lg"},
     "hz+": {"method": "hz+"},
