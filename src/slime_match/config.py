@@ -303,11 +303,10 @@ def _refuse_unread(config: MatchConfig, given: dict[str, Any]) -> None:
             raise ConfigError(f"{key!r} is a Slime option, but method {config.method!r} runs the "
                               f"{config.method} pipeline alone (use method 'slime' with base {config.method!r})")
         if group == "base" and rest and rest.split(".")[0] not in read | {"name"}:
-            pooled = slime and config.slime.pool is not None
-            who = (f"the {config.base.name} and {config.slime.pool} base pipelines do" if pooled else
-                   f"the {config.base.name} base pipeline does")
-            raise ConfigError(f"{who} not use {key!r} ({'they' if pooled else 'it'} read"
-                              f"{'' if pooled else 's'} {', '.join(sorted(read))})")
+            who, they = ((f"the {config.base.name} and {config.slime.pool} base pipelines do", "they read")
+                         if slime and config.slime.pool is not None else
+                         (f"the {config.base.name} base pipeline does", "it reads"))
+            raise ConfigError(f"{who} not use {key!r} ({they} {', '.join(sorted(read))})")
         if group == "views" and rest != "mode":
             _refuse_unread_view_option(config, key, rest)
 

@@ -63,7 +63,7 @@ class Matcher:
             raise ConfigError(f"feature_cache_mb must be >= 0 MiB, got {feature_cache_mb}")
         compiled.install_notice()  # a notice when a first run compiles the loops
         self.config = copy.deepcopy(config or make_config()).validate()  # the caller's config is left as it is
-        self.level_cache = LevelCache(int(feature_cache_mb * 2**20)) if feature_cache_mb > 0 else None
+        self.level_cache = _level_cache(feature_cache_mb)
         self.device = resolve_device(self.config.device)
         self.warnings: list[str] = []
         if passed_over(self.config.auto_choice):
@@ -78,8 +78,7 @@ class Matcher:
         if self.config.method == "slime" and self.config.slime.pool is not None:
             pool_base = dataclasses.replace(base, name=self.config.slime.pool)
             self._resolve_descriptor(pool_base)
-            self.pooled = PooledBase(make_base_pipeline(pool_base, self.device),
-                                     LevelCache(int(feature_cache_mb * 2**20)) if feature_cache_mb > 0 else None)
+            self.pooled = PooledBase(make_base_pipeline(pool_base, self.device), _level_cache(feature_cache_mb))
 
     def _resolve_descriptor(self, base: BaseConfig) -> None:
         """Set a descriptor "auto" of a base that reads one to the best available (a warning names what it
@@ -198,6 +197,11 @@ class Matcher:
                                                   matches.scores, self.config.views, self.config.seed)
         counts = {"keypoints0": len(features0), "keypoints1": len(features1), "views": views.views}
         return xy0, xy1, scores, counts, views
+
+
+def _level_cache(megabytes: float) -> LevelCache | None:
+    """A features cache of ``megabytes`` MiB, or None for 0."""
+    return LevelCache(int(megabytes * 2**20)) if megabytes > 0 else None
 
 
 def _working_image(image: np.ndarray, factor: float, max_side: int | None) -> tuple[np.ndarray, Frame]:

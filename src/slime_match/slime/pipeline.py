@@ -225,14 +225,16 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         planes = block_planes(pipeline, *features.levels[:2], layout.blocks0, layout.blocks1, config.ransac,
                               bins=config.bins, min_matches=config.min_plane_matches, seed=seed, workers=workers,
                               fixed=fixed, matching=matching)
-    pool_decision = None
+    pool_counts: dict[str, int] = {}
+    pool_decisions: dict[str, str] = {}
     if pooled is not None:
         with timer("pooled_base"):
             pool_planes = pooled.block_planes(image0, image1, layout.blocks0, layout.blocks1, config.ransac, config.bins,
                                               config.min_plane_matches, seed, workers)
-        pool_decision = (f"{pooled.pipeline.name}: {len(pool_planes.H)} block planes pooled with the base's "
-                         f"{len(planes.H)}")
-        logger.info("Pooled base %s", pool_decision)
+        pool_counts["pooled_planes"] = len(pool_planes.H)
+        pool_decisions["pool"] = (f"{pooled.pipeline.name}: {len(pool_planes.H)} block planes pooled with the "
+                                  f"base's {len(planes.H)}")
+        logger.info("Pooled base %s", pool_decisions["pool"])
         planes = planes.joined(pool_planes, 0, 0)  # the same blocks: no block index moves
     images = image0, image1
 
@@ -285,14 +287,11 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         for image, blocks in enumerate((state.blocks0, state.blocks1)):
             stages.update(_plane_blocks(planes.level_matches.pairs[:, image], blocks, image))
     counts["views"] = record.views
-    if pooled is not None:
-        counts["pooled_planes"] = len(pool_planes.H)
+    counts.update(pool_counts)
     decisions = {"vote": selection.vote, "vote_reason": selection.vote_reason, "views": record.as_dict(),
-                 "detection": detection, "block_matching": matching}
+                 "detection": detection, "block_matching": matching, **pool_decisions}
     if final.dtm_frame:
         decisions["global_dtm"] = final.dtm_frame
-    if pool_decision:
-        decisions["pool"] = pool_decision
     return SlimeOutput(final.xy0, final.xy1, final.scores, counts, stages, warnings, decisions)
 
 
