@@ -206,11 +206,21 @@ def test_a_branch_whose_views_added_less_than_the_gain_is_dropped_whatever_the_p
 @pytest.mark.parametrize("gain", [1.0, 0.35])
 def test_a_branch_whose_matches_the_views_only_moved_onto_the_images_own_planes_is_dropped(gain):
     gains = {(0, 2.0): 10, (1, 2.0): 60, (0, 4.0): 5, (1, 4.0): 10}
-    moved = {(1, 2.0): 60, (1, 4.0): 10}  # image 1's branch reaches 110 >= 100, none on its views' planes
+    moved = {(1, 2.0): 60}  # image 1's branch reaches 100 >= 100 at tilt 2, none on its views' planes
     state, record, calls = _run("auto", "both", 40, gains, gain=gain, moved=moved)
-    assert calls == [(0, 2.0), (1, 2.0), (1, 4.0)] and state.steps == () and record.decision == "dropped"
-    assert [t.on_views for t in record.tried] == [10, 0, 0]
-    assert "at best 110 matches, 0 on the views' own planes" in record.reason
+    assert state.steps == () and record.decision == "dropped"
+    # the next tilt continues image 0, whose views' planes hold the most, not image 1, whose F^theta holds the most
+    assert calls == [(0, 2.0), (1, 2.0), (0, 4.0)]
+    assert [t.on_views for t in record.tried] == [10, 0, 15]
+    assert "at best 55 matches, 15 on the views' own planes" in record.reason
+
+
+def test_the_leader_is_one_of_the_branches_that_ran_the_tilt():
+    gains = {(0, 2.0): 70, (1, 2.0): 50, (1, 4.0): 70}
+    moved = {(0, 2.0): 70}  # image 0: 110 at tilt 2, none on its views' planes; image 1: 160 at tilt 4
+    state, record, calls = _run("auto", "both", 40, gains, moved=moved)
+    assert calls == [(0, 2.0), (1, 2.0), (1, 4.0)] and state.steps == (1, 1) and state.support == 160
+    assert record.decision == "kept" and record.reason.startswith("image 1's views: 120 matches on their own planes")
 
 
 def test_a_branch_is_kept_once_its_views_planes_hold_the_gain():

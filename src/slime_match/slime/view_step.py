@@ -21,10 +21,11 @@ stopped. The policy, by ``ViewConfig.mode``:
   views' own planes hold ``gain`` of its F^theta matches and its F^theta holds ``min_support`` or ``gain``
   more than the plain one (matches the views only moved onto the images' own planes, through the vote, are no
   sign that the views found the scene's geometry); until then the next tilt continues every branch whose
-  views added at least half the matches the leader's added to the plain F^theta (a lead within a factor of
-  two is noise, not a sign of which image the scene's tilt compresses; every branch when the leader's views
-  added none). When no branch reaches it, the plain state is kept (views that found no stronger geometry
-  would only compete with the images' own planes).
+  views' own planes hold at least half the F^theta matches of the branch whose views' planes hold the most
+  (for the same reason counted on the views' planes only; a lead within a factor of two is noise, not a sign
+  of which image the scene's tilt compresses; every branch when no views' planes hold any), and the leader
+  is chosen among the branches that ran the tilt. When no branch reaches it, the plain state is kept (views
+  that found no stronger geometry would only compete with the images' own planes).
 
 Why branches: a scene's tilt is undone by compressing one image or the other, so the two images' view planes
 are never pooled (the wrong image's views would only add planes that compete with the right one's in the
@@ -177,7 +178,7 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
             record.tried.append(ViewTry(image, tilt, found.views, planes=len(found.planes.H),
                                         support=supports[image], on_views=on_views[image], probes=found.probes,
                                         screens=found.screens, paired=found.paired))
-        leader = max(supports, key=lambda i: (supports[i], -i))
+        leader = max(contenders, key=lambda i: (supports[i], -i))
         enough, reason = geometry_support(branches[leader].selection, views.min_support)
         gains = {image: max(0, supports[image] - plain_support) for image in supports}
         if views.mode == "auto" and on_views[leader] >= min_gain and (enough or gains[leader] >= min_gain):
@@ -188,7 +189,8 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
             record.reason = f"image {leader}'s views: {on_views[leader]} matches on their own planes; {reason}"
             break
         if views.mode == "auto":
-            contenders = tuple(image for image in contenders if 2 * gains[image] >= gains[leader])
+            most = max(on_views[image] for image in contenders)
+            contenders = tuple(image for image in contenders if 2 * on_views[image] >= most)
     else:
         if views.mode == "always" and leader is not None:
             record.decision, record.reason = "kept", f"every view tried; image {leader}'s views hold the most: {reason}"
