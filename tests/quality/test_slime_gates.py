@@ -36,10 +36,13 @@ EVD = {  # extreme viewpoints: adam and shop are solved by the image's own plane
 }
 WXBS = {  # wide baseline with appearance and lighting change; mAA = mean recall of the GT correspondences
     "wxbs/zanky": {"correct": 415, "precision": 0.950, "maa": 0.725},
-    # views tried and dropped (image 1's branch at tilt 4: 73 F^theta matches, all on its views' planes; 100
-    # asked): the plain run's matches, as with views=off
-    "wxbs/kyiv_dolltheater2": {"correct": 69, "precision": 0.726, "maa": 0.637},
+    "wxbs/kyiv_dolltheater2": {"correct": 69, "precision": 0.726, "maa": 0.637},  # run with views=off, see below
 }
+# At its default settings Slime tries views on this pair and drops them (image 1's branch at tilt 4: 73 F^theta
+# matches, all on its views' planes; 100 asked): the same matches as with views=off at five times the time
+# (155 s against 33 s), so its gate runs the plain run; the views step's policy has tests of its own
+# (tests/slime/test_view_step.py) and EVD dum's gate runs views that are kept.
+PLAIN_RUN = {"wxbs/kyiv_dolltheater2"}
 SCANNET = {  # indoor pairs at 640 x 480; correct = consistent with the GT epipolar geometry
     "scannet/0": {"correct": 535, "precision": 0.817},
     "scannet/1": {"correct": 301, "precision": 0.798},
@@ -57,7 +60,7 @@ def _data():
 @pytest.mark.parametrize("pair", [*PLANAR, *EVD, *WXBS, *SCANNET])
 def test_slime_keeps_its_measured_quality(pair):
     measured = {**PLANAR, **EVD, **WXBS, **SCANNET}[pair]
-    row = measure(SLIME, pair)
+    row = measure(SLIME + (",views=off" if pair in PLAIN_RUN else ""), pair)
     assert not shortfalls(row, measured), (pair, row)
 
 
