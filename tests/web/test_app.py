@@ -3,6 +3,7 @@ the folders, non-image uploads, unknown runs and jobs), and the annotation files
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import os
@@ -241,6 +242,39 @@ def test_a_worker_that_dies_fails_its_job_alone(client):
     os.kill(process.pid, 9)  # as the kernel's out-of-memory killer would
     state = wait(client, job["id"])
     assert state["status"] == "failed" and "worker stopped" in state["error"]
+    assert wait(client, client.post("/api/match", headers=POST, json=body).json()["id"])["status"] == "done"
+
+
+class _NoProcesses:
+    """A multiprocessing context whose processes fail to start, as on a system out of processes."""
+
+    def __init__(self, context):
+        self.Queue = context.Queue
+        self._context = context
+
+    def Process(self, **kwargs):
+        process = self._context.Process(**kwargs)
+
+        def start():
+            raise OSError(errno.EAGAIN, os.strerror(errno.EAGAIN))
+
+        process.start = start
+        return process
+
+
+def test_a_worker_that_cannot_start_fails_the_queued_job_and_the_next_match_starts_one(client, monkeypatch):
+    body = {"image0": ref("left.png"), "image1": ref("right.png"), "preset": "rootsift"}
+    runner = client.app.state.slime.jobs
+    with runner._lock:
+        runner._kill_worker()
+    monkeypatch.setattr(runner, "_context", _NoProcesses(runner._context))
+    job = client.post("/api/match", headers=POST, json=body).json()
+    state = wait(client, job["id"])
+    assert state["status"] == "failed", state
+    assert state["error"] == (f"the matching worker could not start ({os.strerror(errno.EAGAIN)}); the next match "
+                              "tries again")
+    assert runner._process is None and runner._tasks is None and runner._events is None
+    monkeypatch.undo()
     assert wait(client, client.post("/api/match", headers=POST, json=body).json()["id"])["status"] == "done"
 
 

@@ -150,10 +150,12 @@ class JobRunner:
         self._by_key = {key: job_id for key, job_id in self._by_key.items() if job_id in self.jobs}
 
     def _start_worker(self) -> None:
-        self._tasks, self._events = self._context.Queue(), self._context.Queue()
-        self._process = self._context.Process(target=_worker_main, args=(self._tasks, self._events),
-                                              name="slime-web-worker", daemon=True)
-        self._process.start()
+        """Start a worker; raises OSError when the system cannot start a process (nothing is kept then)."""
+        tasks, events = self._context.Queue(), self._context.Queue()
+        process = self._context.Process(target=_worker_main, args=(tasks, events), name="slime-web-worker",
+                                        daemon=True)
+        process.start()
+        self._process, self._tasks, self._events = process, tasks, events
 
     def _kill_worker(self) -> None:
         """Stop the worker and the processes it forked (Slime's parallel steps): they share its process group."""
@@ -175,7 +177,16 @@ class JobRunner:
             return
         if self._process is None or not self._process.is_alive():
             self._kill_worker()
-            self._start_worker()
+            try:
+                self._start_worker()
+            except OSError as error:  # out of processes or memory: no worker runs the queued jobs
+                reason = error.strerror or type(error).__name__
+                for job_id, *_ in self._pending:
+                    job = self.jobs[job_id]
+                    job.status, job.finished = "failed", time.time()
+                    job.error = f"the matching worker could not start ({reason}); the next match tries again"
+                self._pending = []
+                return
         job_id, config, path0, path1 = self._pending.pop(0)
         job = self.jobs[job_id]
         job.status, job.started = "running", time.time()
