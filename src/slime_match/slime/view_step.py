@@ -180,10 +180,10 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
                                         screens=found.screens, paired=found.paired))
         leader = max(contenders, key=lambda i: (supports[i], -i))
         enough, reason = geometry_support(branches[leader].selection, views.min_support)
-        gains = {image: max(0, supports[image] - plain_support) for image in supports}
-        if views.mode == "auto" and on_views[leader] >= min_gain and (enough or gains[leader] >= min_gain):
+        added = max(0, supports[leader] - plain_support)  # the leader's gain over the plain F^theta
+        if views.mode == "auto" and on_views[leader] >= min_gain and (enough or added >= min_gain):
             if not enough:
-                reason = (f"they added {gains[leader]} >= {min_gain} matches to the images' own F^theta "
+                reason = (f"they added {added} >= {min_gain} matches to the images' own F^theta "
                           f"({plain_support}; {reason})")
             record.decision = "kept"
             record.reason = f"image {leader}'s views: {on_views[leader]} matches on their own planes; {reason}"
@@ -196,7 +196,7 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
             record.decision, record.reason = "kept", f"every view tried; image {leader}'s views hold the most: {reason}"
         else:
             best = (f"at best {supports[leader]} matches, {on_views[leader]} on the views' own planes and "
-                    f"{gains[leader]} more than the images' own planes' (asked: {min_gain} on the views' planes, "
+                    f"{added} more than the images' own planes' (asked: {min_gain} on the views' planes, "
                     f"and {views.min_support} in all or {min_gain} more)" if leader is not None else "no view")
             leader, record.decision = None, "dropped"
             record.reason = f"every view tried, and F^theta holds {best}: the planes of the images alone are kept"

@@ -58,6 +58,10 @@ class Job:
     finished: float | None = None
     number: int = 0
 
+    def end(self, status: str, error: str) -> None:
+        """End the job unfinished: ``status`` "failed" or "cancelled", ``error`` says why."""
+        self.status, self.finished, self.error = status, time.time(), error
+
     def state(self) -> dict[str, Any]:
         """The job as the API reports it."""
         now = time.time()
@@ -127,7 +131,7 @@ class JobRunner:
             else:
                 self._kill_worker()
                 self._current = None
-            job.status, job.finished, job.error = "cancelled", time.time(), "cancelled by the user"
+            job.end("cancelled", "cancelled by the user")
             self._dispatch()
             return job
 
@@ -182,9 +186,8 @@ class JobRunner:
             except OSError as error:  # out of processes or memory: no worker runs the queued jobs
                 reason = error.strerror or type(error).__name__
                 for job_id, *_ in self._pending:
-                    job = self.jobs[job_id]
-                    job.status, job.finished = "failed", time.time()
-                    job.error = f"the matching worker could not start ({reason}); the next match tries again"
+                    self.jobs[job_id].end("failed", f"the matching worker could not start ({reason}); the next "
+                                                    "match tries again")
                 self._pending = []
                 return
         job_id, config, path0, path1 = self._pending.pop(0)
@@ -216,9 +219,8 @@ class JobRunner:
     def _worker_died(self, code: int | None) -> None:
         job = self.jobs.get(self._current) if self._current else None
         if job is not None and job.status == "running":
-            job.status, job.finished = "failed", time.time()
-            job.error = (f"the matching worker stopped (exit code {code}: killed, or out of memory); "
-                         "the next match starts a new one")
+            job.end("failed", f"the matching worker stopped (exit code {code}: killed, or out of memory); "
+                              "the next match starts a new one")
         self._current = None
         self._kill_worker()
         self._dispatch()
