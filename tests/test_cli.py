@@ -1,6 +1,7 @@
 """The `slime` command line: outputs, options, and bad input (clear one-line errors, never a traceback)."""
 
 import json
+import re
 
 import cv2
 import numpy as np
@@ -194,6 +195,7 @@ def test_blank_image_gives_explicit_empty_result(pair, tmp_path, capsys, caplog)
             assert caplog.text.count(warning) == 1 and warning not in err
         caplog.clear()
     assert "Slime found no match" in summary["warnings"][0]  # the default method says why it is empty
+    assert re.search(r"image 0 holds at most \d keypoints", summary["decisions"]["views"]["reason"])  # and no view
 
 
 def test_identical_images_match_in_place(pair, tmp_path, capsys):

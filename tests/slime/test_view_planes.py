@@ -120,24 +120,22 @@ def test_views_probed_on_their_finest_level_pair_only_those_above_the_floor(graf
 
     unprobed, step = run(0)
     assert "probes" not in step and "paired" not in step and step["views"] == 5
-    everyone, step = run(1)
+    # a screen on more keypoints than the levels hold is the probe itself: every view passes it
+    everyone, step = run(1, screen=10**6)
     probes = step["probes"]
     assert set(probes) == {"0", "36", "72", "108", "144"} and min(probes.values()) >= 1 and step["paired"] == 5
-    assert step["screens"] == {}
+    assert step["screens"] == probes
     for name in ("keypoints0", "keypoints1", "scores"):
         np.testing.assert_array_equal(getattr(everyone, name), getattr(unprobed, name))
     floor = sorted(probes.values())[-2]  # the two strongest views pass
     some, step = run(floor)
-    assert step["probes"] == probes and step["paired"] == 2
+    assert step["probes"] == probes and step["paired"] == 2 and step["screens"] == {}
     passed = {float(angle) for angle, count in probes.items() if count >= floor}
     stages = some.stages
     from_view = stages["planes_pairs"][:, 0] >= len(stages["blocks0"])
     assert from_view.any() and set(stages["planes_view0"][from_view, 1]) <= passed
     _, step = run(max(probes.values()) + 1)
     assert step["paired"] == 0 and step["planes"] == 0
-    # a screen on more keypoints than the levels hold is the probe itself: every view passes it
-    _, step = run(1, screen=10**6)
-    assert step["screens"] == probes == step["probes"] and step["paired"] == 5
     # on 2 keypoints a side no screen has the 8 matches a fundamental matrix needs: none probed in full, none paired
     _, step = run(1, screen=2)
     assert step["screens"] == dict.fromkeys(probes, 0)

@@ -116,6 +116,20 @@ def test_too_few_matches_that_show_no_tilt_need_no_view():
     assert record.as_dict()["plain_tilt"] == {"tilt": 1.3, "matches": 46, "planes": 3}
 
 
+@pytest.mark.parametrize("keypoints", [(0, 900), (900, 7)])
+def test_an_image_with_fewer_keypoints_than_a_plane_needs_gets_no_view(keypoints):
+    calls = []
+    _, record = view_step.add_views(_State(0), ViewConfig(mode="auto"), _finder(GAINS, calls, {}), select=None,
+                                    keypoints=keypoints, min_matches=8)
+    image = keypoints.index(min(keypoints))
+    assert calls == [] and record.decision == "not needed" and record.reason.endswith(
+        f"image {image} holds at most {keypoints[image]} keypoints on a scale level, fewer than the 8 matches a block "
+        "plane needs: the other image's views are matched against it, and its own views hold no texture it lacks")
+    _, record = view_step.add_views(_State(0), ViewConfig(mode="auto"), _finder(GAINS, calls, {}), select=None,
+                                    keypoints=(8, 8), min_matches=8)
+    assert calls[:2] == [(0, 2.0), (1, 2.0)]  # as many as a plane needs: views are tried
+
+
 @pytest.mark.parametrize(("plain_tilt", "views"), [
     (_tilt(2.0, 46), {}),  # foreshortened where it matched: the views' first tilt undoes 1.41-2.83
     (_tilt(1.1, view_step.TILT_MATCHES - 1), {}),  # too few matches on the map to measure a tilt

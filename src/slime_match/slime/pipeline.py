@@ -253,7 +253,10 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
 
     plain = PlaneState(planes, *select(planes), list(layout.blocks0), list(layout.blocks1))
     plain_tilt = None if views.mode == "off" else PlainTilt.of(plain, size1)
-    state, record = add_views(plain, views, find, select, pipeline.slime_view_gain, plain_tilt)
+    keypoints = tuple(max((len(core) for level in levels for core in level.members), default=0)
+                      for levels in features.levels[:2])
+    state, record = add_views(plain, views, find, select, pipeline.slime_view_gain, plain_tilt, keypoints,
+                              config.min_plane_matches)
     if views.mode != "off":
         logger.info("Views: %s", record.reason)
     planes, expansion, selection = state.planes, state.expansion, state.selection

@@ -8,9 +8,11 @@ stopped. The policy, by ``ViewConfig.mode``:
 - "off": no view; the plain state.
 - "always": every tilt of every viewed image; the image whose branch gives F^theta (the planes the epipolar
   vote kept, Secs. 3.6-3.7) the most matches is kept.
-- "auto": nothing when the plain F^theta holds ``min_support`` matches, nor when fewer hold but their tilt
-  (:class:`PlainTilt`: the stretch of their affine map, measured on ``TILT_MATCHES`` matches of
-  ``TILT_PLANES`` planes at least) is under ``min_tilt`` (sqrt 2, the lower edge of the first views' range:
+- "auto": nothing when the plain F^theta holds ``min_support`` matches; nothing when one image holds fewer
+  keypoints on every scale level than a block plane needs matches (a blank or featureless image: the other
+  image's views are matched against its levels, and its own views hold no texture it lacks); nothing either
+  when F^theta holds fewer but their tilt (:class:`PlainTilt`: the stretch of their affine map, measured on
+  ``TILT_MATCHES`` matches of ``TILT_PLANES`` planes at least) is under ``min_tilt`` (sqrt 2, the lower edge of the first views' range:
   ASIFT's tilt-2 views undo tilts from sqrt 2 to 2 sqrt 2): the base then matched the scene where it is not
   foreshortened, so what keeps its matches few is appearance or overlap, which views do not change. Without
   such a measure (no F^theta, too few matches on one affine map, or one plane's) views are tried. Else the
@@ -129,7 +131,8 @@ def geometry_support(selection: PlaneSelection, min_support: int) -> tuple[bool,
 
 def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float], ViewPlanes],
               select: Callable[[BlockPlanes], tuple[Expansion, PlaneSelection]],
-              gain: float = 1.0, plain_tilt: PlainTilt | None = None) -> tuple[PlaneState, ViewRecord]:
+              gain: float = 1.0, plain_tilt: PlainTilt | None = None, keypoints: tuple[int, int] | None = None,
+              min_matches: int = 8) -> tuple[PlaneState, ViewRecord]:
     """The views step under the module's policy.
 
     Args:
@@ -140,6 +143,8 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
         gain: the fraction of ``views.min_support`` that a branch's views must add to the plain F^theta to be
             kept under ``views.min_support`` (the base pipeline's ``slime_view_gain``).
         plain_tilt: the tilt of the plain F^theta's matches; None: not measured (views as without a tilt).
+        keypoints: the most keypoints one scale level of each image holds; None: not counted.
+        min_matches: the matches a block plane needs (``SlimeConfig.min_plane_matches``).
 
     Returns:
         The state to continue from (the plain one, or one image's branch) and what was tried, decided and why.
@@ -155,6 +160,13 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
                              "planes": plain_tilt.planes}
     if views.mode == "auto" and enough:
         record.decision = "not needed"
+        return plain, record
+    if views.mode == "auto" and keypoints is not None and min(keypoints) < min_matches:
+        image = int(np.argmin(keypoints))
+        record.decision = "not needed"
+        record.reason += (f"; image {image} holds at most {keypoints[image]} keypoints on a scale level, fewer than "
+                          f"the {min_matches} matches a block plane needs: the other image's views are matched "
+                          "against it, and its own views hold no texture it lacks")
         return plain, record
     if views.mode == "auto" and plain_tilt is not None and plain_tilt.measured and plain_tilt.tilt < views.min_tilt:
         record.decision = "not needed"
