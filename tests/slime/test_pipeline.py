@@ -142,7 +142,7 @@ def test_consensus_recovers_the_geometry_when_the_paper_vote_keeps_nothing(graf_
     """A vote threshold no match can pass (t_xi = 1000) leaves the paper's rule empty; the default rule then
     takes the largest consistent geometry, says so in the summary, and its matches follow the GT."""
     a, b, h = graf_small
-    results = {vote: Matcher(make_config("slime", scales=(1, 2), **{"slime.tiles.t_xi": 1000,
+    results = {vote: Matcher(make_config("slime", scales=(1, 2), views="off", **{"slime.tiles.t_xi": 1000,
                                                                      "slime.tiles.vote": vote}, **WEIGHT_FREE))(a, b)
                for vote in ("paper", "consensus")}
     assert len(results["paper"]) == 0 and results["paper"].summary["decisions"]["vote"] == "paper"
