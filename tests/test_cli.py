@@ -195,7 +195,8 @@ def test_blank_image_gives_explicit_empty_result(pair, tmp_path, capsys, caplog)
             assert caplog.text.count(warning) == 1 and warning not in err
         caplog.clear()
     assert "Slime found no match" in summary["warnings"][0]  # the default method says why it is empty
-    assert re.search(r"image 0 holds at most \d keypoints", summary["decisions"]["views"]["reason"])  # and no view
+    # and tries no view
+    assert re.search(r"the blocks of image 0 hold at most \d keypoints", summary["decisions"]["views"]["reason"])
 
 
 def test_identical_images_match_in_place(pair, tmp_path, capsys):

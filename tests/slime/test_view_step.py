@@ -123,8 +123,8 @@ def test_an_image_with_fewer_keypoints_than_a_plane_needs_gets_no_view(keypoints
                                     keypoints=keypoints, min_matches=8)
     image = keypoints.index(min(keypoints))
     assert calls == [] and record.decision == "not needed" and record.reason.endswith(
-        f"image {image} holds at most {keypoints[image]} keypoints on a scale level, fewer than the 8 matches a block "
-        "plane needs: the other image's views are matched against it, and its own views hold no texture it lacks")
+        f"the blocks of image {image} hold at most {keypoints[image]} keypoints, fewer than the 8 matches a block "
+        "plane needs: the other image's views are matched against them, and its own views hold no texture it lacks")
     _, record = view_step.add_views(_State(0), ViewConfig(mode="auto"), _finder(GAINS, calls, {}), select=None,
                                     keypoints=(8, 8), min_matches=8)
     assert calls[:2] == [(0, 2.0), (1, 2.0)]  # as many as a plane needs: views are tried

@@ -8,26 +8,26 @@ stopped. The policy, by ``ViewConfig.mode``:
 - "off": no view; the plain state.
 - "always": every tilt of every viewed image; the image whose branch gives F^theta (the planes the epipolar
   vote kept, Secs. 3.6-3.7) the most matches is kept.
-- "auto": nothing when the plain F^theta holds ``min_support`` matches; nothing when one image holds fewer
-  keypoints on every scale level than a block plane needs matches (a blank or featureless image: the other
-  image's views are matched against its levels, and its own views hold no texture it lacks); nothing either
-  when F^theta holds fewer but their tilt (:class:`PlainTilt`: the stretch of their affine map, measured on
-  ``TILT_MATCHES`` matches of ``TILT_PLANES`` planes at least) is under ``min_tilt`` (sqrt 2, the lower edge of the first views' range:
+- "auto": nothing when the plain F^theta holds ``min_support`` matches; nothing when every block of one image
+  holds fewer keypoints than a block plane needs matches (a blank or featureless image: the other image's views
+  are matched against its blocks, and its own views hold no texture it lacks); nothing either when F^theta holds
+  fewer but their tilt (:class:`PlainTilt`: the stretch of their affine map, measured on ``TILT_MATCHES`` matches
+  of ``TILT_PLANES`` planes at least) is under ``min_tilt`` (sqrt 2, the lower edge of the first views' range:
   ASIFT's tilt-2 views undo tilts from sqrt 2 to 2 sqrt 2): the base then matched the scene where it is not
-  foreshortened, so what keeps its matches few is appearance or overlap, which views do not change. Without
-  such a measure (no F^theta, too few matches on one affine map, or one plane's) views are tried. Else the
-  first tilt of every viewed image, each image's views joining that image's own branch of the plain state;
-  the branch whose F^theta holds the most matches leads. With ``gain`` = ``min_support`` times the base's
-  ``slime_view_gain`` (1 for the handcrafted bases; 0.35 for the learned ones, which match the same planes
-  about three times more sparsely and reach fewer matches on a correct geometry), the leader is kept once the
-  views' own planes hold ``gain`` of its F^theta matches and its F^theta holds ``min_support`` or ``gain``
-  more than the plain one (matches the views only moved onto the images' own planes, through the vote, are no
-  sign that the views found the scene's geometry); until then the next tilt continues every branch whose
-  views' own planes hold at least half the F^theta matches of the branch whose views' planes hold the most
-  (for the same reason counted on the views' planes only; a lead within a factor of two is noise, not a sign
-  of which image the scene's tilt compresses; every branch when no views' planes hold any), and the leader
-  is chosen among the branches that ran the tilt. When no branch reaches it, the plain state is kept (views
-  that found no stronger geometry would only compete with the images' own planes).
+  foreshortened, so what keeps its matches few is appearance or overlap, which views do not change. Without such a
+  measure (no F^theta, too few matches on one affine map, or one plane's) views are tried. Else the first tilt of
+  every viewed image, each image's views joining that image's own branch of the plain state; the branch whose
+  F^theta holds the most matches leads. With ``gain`` = ``min_support`` times the base's ``slime_view_gain`` (1
+  for the handcrafted bases; 0.35 for the learned ones, which match the same planes about three times more
+  sparsely and reach fewer matches on a correct geometry), the leader is kept once the views' own planes hold
+  ``gain`` of its F^theta matches and its F^theta holds ``min_support`` or ``gain`` more than the plain one
+  (matches the views only moved onto the images' own planes, through the vote, are no sign that the views found
+  the scene's geometry); until then the next tilt continues every branch whose views' own planes hold at least
+  half the F^theta matches of the branch whose views' planes hold the most (for the same reason counted on the
+  views' planes only; a lead within a factor of two is noise, not a sign of which image the scene's tilt
+  compresses; every branch when no views' planes hold any), and the leader is chosen among the branches that ran
+  the tilt. When no branch reaches it, the plain state is kept (views that found no stronger geometry would only
+  compete with the images' own planes).
 
 Why branches: a scene's tilt is undone by compressing one image or the other, so the two images' view planes
 are never pooled (the wrong image's views would only add planes that compete with the right one's in the
@@ -143,7 +143,7 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
         gain: the fraction of ``views.min_support`` that a branch's views must add to the plain F^theta to be
             kept under ``views.min_support`` (the base pipeline's ``slime_view_gain``).
         plain_tilt: the tilt of the plain F^theta's matches; None: not measured (views as without a tilt).
-        keypoints: the most keypoints one scale level of each image holds; None: not counted.
+        keypoints: the most keypoints one block of each image holds (in its core); None: not counted.
         min_matches: the matches a block plane needs (``SlimeConfig.min_plane_matches``).
 
     Returns:
@@ -164,9 +164,9 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
     if views.mode == "auto" and keypoints is not None and min(keypoints) < min_matches:
         image = int(np.argmin(keypoints))
         record.decision = "not needed"
-        record.reason += (f"; image {image} holds at most {keypoints[image]} keypoints on a scale level, fewer than "
-                          f"the {min_matches} matches a block plane needs: the other image's views are matched "
-                          "against it, and its own views hold no texture it lacks")
+        record.reason += (f"; the blocks of image {image} hold at most {keypoints[image]} keypoints, fewer than the "
+                          f"{min_matches} matches a block plane needs: the other image's views are matched against "
+                          "them, and its own views hold no texture it lacks")
         return plain, record
     if views.mode == "auto" and plain_tilt is not None and plain_tilt.measured and plain_tilt.tilt < views.min_tilt:
         record.decision = "not needed"
