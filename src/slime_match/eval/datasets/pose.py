@@ -14,6 +14,14 @@ MEGADEPTH_MAX_SIDE = 1200
 SCANNET_SIZE = (640, 480)
 
 
+def _pose_pair(name: str, image0: Path, image1: Path, K0: np.ndarray, K1: np.ndarray, R: np.ndarray,
+               t: np.ndarray, **size: object) -> Pair:
+    """A pose pair: intrinsics K0, K1 (3, 3), the pose of camera 1 from camera 0 (``X1 = R X0 + t``) and the F they
+    give; ``size`` is ``Pair``'s ``size`` or ``max_side``."""
+    return Pair(name, image0, image1, "pose", F=fundamental_from_pose(K0, K1, R, t), K0=K0, K1=K1, R=R, t=t,
+                **size)
+
+
 def read_scannet_pairs(pairs_file: Path | str, images_dir: Path | str | None = None) -> list[Pair]:
     """SuperGlue-style pair list: ``name0 name1 rot0 rot1 K0(9) K1(9) T_0to1(16)`` (row-major).
 
@@ -34,18 +42,8 @@ def read_scannet_pairs(pairs_file: Path | str, images_dir: Path | str | None = N
         v = np.asarray(f[4:], np.float64)
         K0, K1, T = v[:9].reshape(3, 3), v[9:18].reshape(3, 3), v[18:].reshape(4, 4)
         R, t = T[:3, :3], T[:3, 3]
-        pair = Pair(
-            f"{Path(f[0]).stem}-{Path(f[1]).stem}",
-            images_dir / f[0],
-            images_dir / f[1],
-            "pose",
-            F=fundamental_from_pose(K0, K1, R, t),
-            K0=K0,
-            K1=K1,
-            R=R,
-            t=t,
-            size=SCANNET_SIZE,
-        )
+        pair = _pose_pair(f"{Path(f[0]).stem}-{Path(f[1]).stem}", images_dir / f[0], images_dir / f[1], K0, K1,
+                          R, t, size=SCANNET_SIZE)
         for which, rot in ((0, int(f[2])), (1, int(f[3]))):
             if rot % 4:
                 img, A = rotate_image(read_image(pair.image1 if which else pair.image0), 90 * rot)
@@ -70,20 +68,8 @@ def read_megadepth1500(images_root: Path | str, gt_dir: Path | str) -> list[Pair
             T = poses[j] @ np.linalg.inv(poses[i])
             K0, K1 = np.asarray(Ks[i], np.float64), np.asarray(Ks[j], np.float64)
             R, t = T[:3, :3], T[:3, 3]
-            pairs.append(
-                Pair(
-                    f"{scene}/{Path(paths[i]).stem}-{Path(paths[j]).stem}",
-                    images_root / paths[i],
-                    images_root / paths[j],
-                    "pose",
-                    F=fundamental_from_pose(K0, K1, R, t),
-                    K0=K0,
-                    K1=K1,
-                    R=R,
-                    t=t,
-                    max_side=MEGADEPTH_MAX_SIDE,
-                )
-            )
+            pairs.append(_pose_pair(f"{scene}/{Path(paths[i]).stem}-{Path(paths[j]).stem}", images_root / paths[i],
+                                    images_root / paths[j], K0, K1, R, t, max_side=MEGADEPTH_MAX_SIDE))
     if not pairs:
         raise FileNotFoundError(f"no MegaDepth-1500 scene files in {gt_dir}")
     return pairs
@@ -103,18 +89,7 @@ def read_scannet1500(images_root: Path | str, gt_dir: Path | str) -> list[Pair]:
         scene = f"scene{sc:04d}_{sub:02d}"
         K = np.asarray(intr[scene], np.float64)
         R, t = rel[:, :3], rel[:, 3]
-        pairs.append(
-            Pair(
-                f"{scene}/{s0}-{s1}",
-                images_root / scene / "color" / f"{s0}.jpg",
-                images_root / scene / "color" / f"{s1}.jpg",
-                "pose",
-                F=fundamental_from_pose(K, K, R, t),
-                K0=K,
-                K1=K.copy(),
-                R=R,
-                t=t,
-                size=SCANNET_SIZE,
-            )
-        )
+        color = images_root / scene / "color"
+        pairs.append(_pose_pair(f"{scene}/{s0}-{s1}", color / f"{s0}.jpg", color / f"{s1}.jpg", K, K.copy(), R, t,
+                                size=SCANNET_SIZE))
     return pairs
