@@ -79,7 +79,8 @@ def main() -> None:
                "record": result.summary["decisions"]["views"]}
         if pair is not None:
             raw = {"m": (result.keypoints0, result.keypoints1)}
-            row["maa"] = evaluate_protocol(label.partition("/")[0], pair_gt(pair, (a, b)), raw, PROTOCOL)["m"]["maa"]
+            scores = evaluate_protocol(label.partition("/")[0], pair_gt(pair, (a, b)), raw, PROTOCOL)["m"]
+            row["maa"], row["maa_mean"] = scores["maa"], scores["maa_mean"]
         runs.append(row)
         print(json.dumps(row), flush=True)
         return row

@@ -47,6 +47,8 @@ def test_protocols_per_pair_dataset_and_console(hard_run, capsys):
     for pair in summary["pairs"]:
         rec = pair["methods"][label]
         assert 0 <= rec["protocol"]["maa"] <= 1 and set(rec["thresholds"]) == {"none", "3"}
+        low, high = rec["protocol"]["maa_min"], rec["protocol"]["maa_max"]  # over the 10 orders of the matches
+        assert low <= rec["protocol"]["maa"] <= high and low <= rec["protocol"]["maa_mean"] <= high
         if pair["protocol"] == "wxbs":
             assert len(rec["protocol"]["recall"]) == 20
             assert rec["protocol"]["maa"] == pytest.approx(np.mean(rec["protocol"]["recall"]))
@@ -61,10 +63,13 @@ def test_protocols_per_pair_dataset_and_console(hard_run, capsys):
         maa = [p["methods"][label]["protocol"]["maa"] for p in members]
         assert row["protocol"] == protocol and row["pairs"] == 2
         assert row["maa"] == pytest.approx(np.mean(maa)) and row["solved"] == sum(m > 0 for m in maa)
-        assert f"{dataset} {label}: {protocol.upper()} mAA {row['maa']:.2f}, {row['solved']}/2 pairs solved" in console
+        assert row["maa_mean"] == pytest.approx(np.mean([p["methods"][label]["protocol"]["maa_mean"] for p in members]))
+        assert (f"{dataset} {label}: {protocol.upper()} mAA {row['maa']:.2f} ({row['maa_mean']:.2f} over 10 orders "
+                f"of the matches), {row['solved']}/2 pairs solved") in console
     table = (out / "table.md").read_text()
     assert "### Standard protocols (raw matches, OpenCV MAGSAC++)" in table
     assert "MAGSAC++ 3 px" in table and "### Standard protocols per pair (pair mAA" in table
+    assert "| mAA | mAA over 10 orders |" in table
     assert sum(line.startswith(("| evd/", "| wxbs/")) for line in table.splitlines()) == 4
 
 
@@ -81,7 +86,8 @@ def test_pairs_without_matches_are_counted_and_listed(hard_run, tmp_path, capsys
     assert bench.main(argv) == 0
     console = capsys.readouterr().out
     summary = json.loads((out / "metrics.json").read_text())
-    assert summary["pairs"][2]["methods"][label]["protocol"] == {"maa": 0.0, "recall": [0.0] * 20}
+    assert summary["pairs"][2]["methods"][label]["protocol"] == {
+        "maa": 0.0, "maa_mean": 0.0, "maa_min": 0.0, "maa_max": 0.0, "recall": [0.0] * 20}
     assert f"1 without matches ({name})" in console
     assert f"| {name} |" in (out / "table.md").read_text().split("per pair")[0]
 
@@ -128,13 +134,17 @@ def test_protocol_options():
     cfg = bench.config_from_args(_parse(["planar:x", "--protocol-datasets", "EVD, planar"]))
     assert cfg.protocol_datasets == ["evd", "planar"]
     assert (cfg.protocol_h_threshold, cfg.protocol_f_threshold, cfg.protocol_max_iters) == (3.0, 3.0, 10000)
+    assert cfg.protocol_orders == 10
     cfg = bench.config_from_args(
-        _parse(["wxbs:x", "--protocol-datasets", "", "--protocol-f-threshold", "0.5", "--protocol-max-iters", "99"])
+        _parse(["wxbs:x", "--protocol-datasets", "", "--protocol-f-threshold", "0.5", "--protocol-max-iters", "99",
+                "--protocol-orders", "1"])
     )
     assert cfg.protocol_datasets == [] and cfg.protocol_f_threshold == 0.5 and cfg.protocol_max_iters == 99
+    assert cfg.protocol_orders == 1
     defaults = BenchConfig()
     assert defaults.protocol_datasets == ["evd", "wxbs"] and defaults.protocol_h_threshold == 3.0
-    for bad in (["--protocol-h-threshold", "0"], ["--protocol-f-threshold", "-1"], ["--protocol-max-iters", "0"]):
+    for bad in (["--protocol-h-threshold", "0"], ["--protocol-f-threshold", "-1"], ["--protocol-max-iters", "0"],
+                ["--protocol-orders", "0"]):
         with pytest.raises(ConfigError):
             bench.config_from_args(_parse(["evd:x", *bad]))
     assert bench.config_from_args(_parse(["evd:x", "--methods", "asift;opencv-sift:mutual=true"])).methods == [

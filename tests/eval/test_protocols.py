@@ -61,7 +61,8 @@ def test_transfer_error_pools_both_directions_over_the_common_area():
 def test_evd_failures_score_zero():
     x0, x1 = _exact_matches(H_GT, n=3)
     assert P.magsac_homography(x0, x1, 3.0, 1000) is None
-    assert P.evd_protocol(x0, x1, H_GT, SHAPE, SHAPE, 3.0, 1000) == {"maa": 0.0, "error": math.inf}
+    assert P.evd_protocol(x0, x1, H_GT, SHAPE, SHAPE, 3.0, 1000) == {
+        "maa": 0.0, "maa_mean": 0.0, "maa_min": 0.0, "maa_max": 0.0, "error": math.inf}
     assert P.homography_transfer_error(None, H_GT, SHAPE, SHAPE) == math.inf
 
 
@@ -112,7 +113,8 @@ def test_wxbs_too_few_matches_scores_zero():
     x0, x1 = _rectified_matches(7)
     corrs = np.c_[x0, x1]
     assert P.magsac_fundamental(x0, x1, 1.0, 1000) is None
-    assert P.wxbs_protocol(x0, x1, corrs, 1.0, 1000) == {"maa": 0.0, "recall": [0.0] * 20}
+    assert P.wxbs_protocol(x0, x1, corrs, 1.0, 1000, orders=3) == {
+        "maa": 0.0, "maa_mean": 0.0, "maa_min": 0.0, "maa_max": 0.0, "recall": [0.0] * 20}
 
 
 # eleven matches that a Slime run returned on a WxBS pair, on which OpenCV's MAGSAC++ for F raises an assertion
@@ -128,3 +130,35 @@ def test_a_set_opencv_asserts_on_scores_zero_instead_of_stopping_the_bench():
     x0, x1 = USAC_ASSERTS[:, :2], USAC_ASSERTS[:, 2:]
     assert P.magsac_fundamental(x0, x1, 3.0, 10000) is None
     assert P.wxbs_protocol(x0, x1, USAC_ASSERTS, 3.0, 10000)["maa"] == 0.0
+
+
+def test_match_orders_start_with_the_given_order_and_repeat():
+    orders = P.match_orders(6, 4)
+    assert len(orders) == 4 and orders[0].tolist() == list(range(6))
+    assert all(sorted(o.tolist()) == list(range(6)) for o in orders[1:])
+    assert all((a == b).all() for a, b in zip(orders, P.match_orders(6, 4)))  # the same permutations every call
+
+
+def _noisy_homography_matches(n_in: int = 60, n_out: int = 60) -> tuple[np.ndarray, np.ndarray]:
+    """Inliers of H_GT with 6 px noise and uniform outliers: a set on which the estimate depends on the order."""
+    rng = np.random.default_rng(3)
+    x0, x1 = _exact_matches(H_GT, n_in + n_out, seed=3)
+    x1 = x1 + rng.normal(0, 6.0, x1.shape)
+    x1[n_in:] = rng.uniform([0, 0], [SHAPE[1], SHAPE[0]], (n_out, 2))
+    return x0, x1
+
+
+def test_protocols_over_orders_are_the_mean_of_each_order_run_alone():
+    x0, x1 = _noisy_homography_matches()
+    runs = [P.evd_protocol(x0[o], x1[o], H_GT, SHAPE, SHAPE, 3.0, 50)["maa"] for o in P.match_orders(len(x0), 5)]
+    result = P.evd_protocol(x0, x1, H_GT, SHAPE, SHAPE, 3.0, 50, orders=5)
+    assert result["maa"] == runs[0]
+    assert result["maa_mean"] == pytest.approx(np.mean(runs))
+    assert (result["maa_min"], result["maa_max"]) == (min(runs), max(runs)) and min(runs) < max(runs)
+
+    y0, y1 = _rectified_matches(40)
+    corrs = np.c_[y0, y1]
+    y1 = y1 + np.random.default_rng(4).normal(0, 1.0, y1.shape)
+    runs = [P.wxbs_protocol(y0[o], y1[o], corrs, 1.0, 50)["maa"] for o in P.match_orders(len(y0), 4)]
+    result = P.wxbs_protocol(y0, y1, corrs, 1.0, 50, orders=4)
+    assert result["maa"] == runs[0] and result["maa_mean"] == pytest.approx(np.mean(runs))

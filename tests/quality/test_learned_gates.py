@@ -22,8 +22,8 @@ MEASURED = {
     "slime-aliked": {
         "graf/1-4": {"correct": 5388, "precision": 0.962, "coverage": 0.883},
         "graf/1-3@90": {"correct": 7777, "precision": 0.995, "coverage": 0.922},
-        "wxbs/rovenki": {"correct": 1106, "precision": 0.585, "maa": 0.905},
-        "wxbs/kyiv_dolltheater2": {"correct": 154, "precision": 0.667, "maa": 0.872},
+        "wxbs/rovenki": {"correct": 1106, "precision": 0.585, "maa": 0.888},
+        "wxbs/kyiv_dolltheater2": {"correct": 154, "precision": 0.667, "maa": 0.878},
         "evd/shop": {"correct": 1284, "precision": 0.891, "maa": 0.933},
     },
     "aliked-lg": {

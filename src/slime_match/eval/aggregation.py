@@ -85,18 +85,21 @@ def aggregate(summary: dict[str, Any]) -> dict[str, Any]:
 
 
 def _protocols(pairs: list[dict], methods: list[str]) -> dict[tuple[str, str], dict[str, Any]]:
-    """{(dataset spec, method): {"protocol": "evd" | "wxbs", "maa": mean pair mAA, "solved": pairs with
-    mAA > 0, "pairs": n, "no_match_pairs": names of the pairs without raw matches}} over the pairs scored
-    by a protocol, in dataset order."""
+    """{(dataset spec, method): {"protocol": "evd" | "wxbs", "maa": mean pair mAA, "maa_mean": mean of the
+    pairs' mAA over the matches' orders (None for results scored without it), "solved": pairs with mAA > 0,
+    "pairs": n, "no_match_pairs": names of the pairs without raw matches}} over the pairs scored by a
+    protocol, in dataset order."""
     out = {}
     datasets = dict.fromkeys(p["dataset"] for p in pairs if p.get("protocol"))
     for dataset in datasets:
         members = [p for p in pairs if p["dataset"] == dataset and p.get("protocol")]
         for m in methods:
             maa = np.array([p["methods"][m]["protocol"]["maa"] for p in members])
+            over_orders = [p["methods"][m]["protocol"].get("maa_mean") for p in members]
             out[(dataset, m)] = {
                 "protocol": "/".join(dict.fromkeys(p["protocol"] for p in members)),
                 "maa": float(maa.mean()),
+                "maa_mean": None if None in over_orders else float(np.mean(over_orders)),
                 "solved": int((maa > 0).sum()),
                 "pairs": len(members),
                 "no_match_pairs": [p["name"] for p in members if p["methods"][m]["raw_matches"] == 0],

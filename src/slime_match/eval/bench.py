@@ -197,6 +197,7 @@ def config_from_args(args: argparse.Namespace) -> BenchConfig:
         protocol_h_threshold=args.protocol_h_threshold,
         protocol_f_threshold=args.protocol_f_threshold,
         protocol_max_iters=args.protocol_max_iters,
+        protocol_orders=args.protocol_orders,
     ).validate()
 
 
@@ -210,8 +211,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
     for (dataset, method), v in stats["protocols"].items():
         empty = f" ({', '.join(v['no_match_pairs'])})" if v["no_match_pairs"] else ""
         print(
-            f"{dataset} {method}: {v['protocol'].upper()} mAA {v['maa']:.2f}, {v['solved']}/{v['pairs']} pairs "
-            f"solved, {len(v['no_match_pairs'])} without matches{empty}"
+            f"{dataset} {method}: {v['protocol'].upper()} mAA {v['maa']:.2f} ({v['maa_mean']:.2f} over "
+            f"{args.protocol_orders} orders of the matches), {v['solved']}/{v['pairs']} pairs solved, "
+            f"{len(v['no_match_pairs'])} without matches{empty}"
         )
     return 0
 

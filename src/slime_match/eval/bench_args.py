@@ -52,5 +52,12 @@ def add_bench_parser(subparsers: argparse._SubParsersAction, run: Callable[[argp
     p.add_argument("--protocol-h-threshold", type=float, default=3.0, help="EVD protocol MAGSAC++ threshold (px)")
     p.add_argument("--protocol-f-threshold", type=float, default=3.0, help="WxBS protocol MAGSAC++ threshold (px)")
     p.add_argument("--protocol-max-iters", type=int, default=10000, help="MAGSAC++ iterations of the protocols")
+    p.add_argument(
+        "--protocol-orders",
+        type=int,
+        default=10,
+        help="orders of the matches each protocol runs on (the given one and random permutations; MAGSAC++ "
+        "samples by index): the tables add the mean pair mAA over them; 1 = the given order only",
+    )
     p.set_defaults(func=run)
     return p

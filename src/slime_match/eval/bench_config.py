@@ -36,6 +36,8 @@ class BenchConfig:
         protocol_h_threshold: MAGSAC++ threshold in px of the EVD protocol's homography.
         protocol_f_threshold: MAGSAC++ threshold in px of the WxBS protocol's fundamental matrix.
         protocol_max_iters: MAGSAC++ iterations of both protocols.
+        protocol_orders: orders of the matches each protocol is run on (the given one and random
+            permutations): the pair's ``maa_mean`` is the mean over them (its RANSAC draws samples by index).
     """
 
     datasets: list[str] = field(default_factory=lambda: ["graf"])
@@ -57,6 +59,7 @@ class BenchConfig:
     protocol_h_threshold: float = 3.0
     protocol_f_threshold: float = 3.0
     protocol_max_iters: int = 10000
+    protocol_orders: int = 10
 
     def validate(self) -> BenchConfig:
         if not self.methods:
@@ -77,4 +80,6 @@ class BenchConfig:
             raise ConfigError("protocol MAGSAC++ thresholds must be > 0 px")
         if self.protocol_max_iters < 1:
             raise ConfigError(f"protocol_max_iters must be >= 1, got {self.protocol_max_iters}")
+        if self.protocol_orders < 1:
+            raise ConfigError(f"protocol_orders must be >= 1, got {self.protocol_orders}")
         return self

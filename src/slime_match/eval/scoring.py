@@ -170,10 +170,10 @@ def evaluate_protocol(
         if protocol == "evd":
             out[label] = P.evd_protocol(
                 x0, x1, gt.pair.H, gt.shape0, gt.shape1, config.protocol_h_threshold, config.protocol_max_iters,
-                config.homography_step,
+                config.homography_step, config.protocol_orders,
             )
         else:
             out[label] = P.wxbs_protocol(
-                x0, x1, gt.pair.corrs, config.protocol_f_threshold, config.protocol_max_iters
+                x0, x1, gt.pair.corrs, config.protocol_f_threshold, config.protocol_max_iters, config.protocol_orders
             )
     return out

@@ -9,7 +9,11 @@
   recall at t = fraction of GT correspondences closer than t; pair mAA = mean recall over t = 1..20 px.
 
 A pair without a model (too few matches, or MAGSAC++ finds none) scores mAA 0. OpenCV's USAC seeds its
-own random generator with a fixed state, so the estimates are deterministic.
+own random generator with a fixed state, so the estimates are deterministic; but its samples are drawn by
+index, so the estimate, and the pair's mAA, depend on the order in which a method lists its matches. With
+``orders`` > 1 each protocol is also run on ``orders - 1`` random permutations of the matches (a fixed
+generator) and reports the mean mAA over all orders (``maa_mean``, with ``maa_min`` and ``maa_max``): the
+protocol's expected result over its RANSAC's sample sequences, where ``maa`` is one draw of it.
 """
 
 from __future__ import annotations
@@ -107,6 +111,17 @@ def homography_transfer_error(
     return float(pooled.mean()) if len(pooled) else math.inf
 
 
+def match_orders(n: int, orders: int) -> list[np.ndarray]:
+    """Index orders of n matches: the given order, then ``orders - 1`` random permutations (fixed seed)."""
+    rng = np.random.default_rng(0)
+    return [np.arange(n)] + [rng.permutation(n) for _ in range(orders - 1)]
+
+
+def _spread(maa: list[float]) -> dict[str, float]:
+    """{"maa": the first order's mAA, "maa_mean", "maa_min", "maa_max" over all orders}."""
+    return {"maa": maa[0], "maa_mean": float(np.mean(maa)), "maa_min": min(maa), "maa_max": max(maa)}
+
+
 def symmetric_epipolar_distance(F: np.ndarray, x0: np.ndarray, x1: np.ndarray) -> np.ndarray:
     """(N,) symmetric epipolar distance in px of (N, 2) correspondences: the larger of the distance from x1 to
     the line ``F x0`` and from x0 to the line ``F^T x1`` (a correspondence is as far as its worse image)."""
@@ -129,30 +144,37 @@ def evd_protocol(
     threshold: float,
     max_iters: int,
     step: int = 1,
+    orders: int = 1,
 ) -> dict[str, Any]:
-    """EVD protocol of one pair's (K, 2) raw matches.
+    """EVD protocol of one pair's (K, 2) raw matches, in their given order and ``orders - 1`` others.
 
     Returns:
-        {"maa": mean over :data:`EVD_THRESHOLDS` of [error < t], "error": px (inf without a model)}.
+        {"maa": mean over :data:`EVD_THRESHOLDS` of [error < t] (the given order), "error": its px (inf
+        without a model), "maa_mean" / "maa_min" / "maa_max": over the orders}.
     """
-    H = magsac_homography(x0, x1, threshold, max_iters)
-    error = homography_transfer_error(H, H_gt, shape0, shape1, step)
-    return {"maa": float(np.mean([error < t for t in EVD_THRESHOLDS])), "error": error}
+    errors = [
+        homography_transfer_error(magsac_homography(x0[o], x1[o], threshold, max_iters), H_gt, shape0, shape1, step)
+        for o in match_orders(len(x0), orders)
+    ]
+    return {**_spread([float(np.mean([e < t for t in EVD_THRESHOLDS])) for e in errors]), "error": errors[0]}
 
 
 def wxbs_protocol(
-    x0: np.ndarray, x1: np.ndarray, corrs: np.ndarray, threshold: float, max_iters: int
+    x0: np.ndarray, x1: np.ndarray, corrs: np.ndarray, threshold: float, max_iters: int, orders: int = 1
 ) -> dict[str, Any]:
-    """WxBS protocol of one pair's (K, 2) raw matches against (M, 4) GT correspondences ``x0 y0 x1 y1``.
+    """WxBS protocol of one pair's (K, 2) raw matches against (M, 4) GT correspondences ``x0 y0 x1 y1``, in
+    the matches' given order and ``orders - 1`` others.
 
     Returns:
-        {"maa": mean recall over :data:`WXBS_THRESHOLDS`, "recall": recall at each of them (all 0 without
-        a model)}.
+        {"maa": mean recall over :data:`WXBS_THRESHOLDS` (the given order), "recall": its recall at each of
+        them (all 0 without a model), "maa_mean" / "maa_min" / "maa_max": over the orders}.
     """
-    F = magsac_fundamental(x0, x1, threshold, max_iters)
-    if F is None:
-        recall = [0.0] * len(WXBS_THRESHOLDS)
-    else:
-        d = symmetric_epipolar_distance(F, corrs[:, :2], corrs[:, 2:])
-        recall = [float(np.mean(d < t)) for t in WXBS_THRESHOLDS]
-    return {"maa": float(np.mean(recall)), "recall": recall}
+    recalls = []
+    for o in match_orders(len(x0), orders):
+        F = magsac_fundamental(x0[o], x1[o], threshold, max_iters)
+        if F is None:
+            recalls.append([0.0] * len(WXBS_THRESHOLDS))
+        else:
+            d = symmetric_epipolar_distance(F, corrs[:, :2], corrs[:, 2:])
+            recalls.append([float(np.mean(d < t)) for t in WXBS_THRESHOLDS])
+    return {**_spread([float(np.mean(r)) for r in recalls]), "recall": recalls[0]}
