@@ -149,7 +149,7 @@ def _protocol_tables(summary: dict[str, Any], agg: dict[str, Any]) -> list[str]:
 
 
 def _maybe(value: float | None) -> str:
-    """A mAA with two decimals, "--" when the results were scored without it."""
+    """An mAA with two decimals, "--" when the results were scored without it."""
     return "--" if value is None else f"{value:.2f}"
 
 
