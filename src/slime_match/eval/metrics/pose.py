@@ -61,15 +61,18 @@ def estimate_pose_essential(
 
     Returns:
         (R (3, 3), t (3,) unit vector, inliers (K,) bool of the RANSAC), or None with fewer than 5
-        matches or when no essential matrix is found.
+        matches or when no essential matrix is found (OpenCV's assertion on a degenerate sample included).
     """
     if len(x0) < 5:
         return None
     p0, p1 = _normalise(x0, K0), _normalise(x1, K1)
     f_mean = np.mean([K0[0, 0], K0[1, 1], K1[0, 0], K1[1, 1]])
-    E, mask = cv2.findEssentialMat(
-        p0, p1, np.eye(3), method=cv2.RANSAC, prob=conf, threshold=threshold / f_mean
-    )
+    try:
+        E, mask = cv2.findEssentialMat(
+            p0, p1, np.eye(3), method=cv2.RANSAC, prob=conf, threshold=threshold / f_mean
+        )
+    except cv2.error:  # OpenCV's five-point solver asserts on some degenerate samples instead of skipping them
+        return None
     if E is None:
         return None
     best = None
