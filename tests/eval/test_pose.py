@@ -48,6 +48,19 @@ def test_pose_estimation_recovers_synthetic_pose():
     assert estimate_pose_essential(x0[:4], x1[:4], K0, K1) is None
 
 
+def test_pose_estimation_answers_none_when_opencv_asserts(monkeypatch):
+    """Some OpenCV releases' five-point solver asserts on a degenerate sample: no pose, not a stopped bench."""
+    import cv2
+
+    def asserting(*args, **kwargs):
+        raise cv2.error("solvePoly: (-215:Assertion failed)")
+
+    rng = np.random.default_rng(1)
+    K0, K1, _, _, x0, x1 = _synthetic_two_view(rng)
+    monkeypatch.setattr(cv2, "findEssentialMat", asserting)
+    assert estimate_pose_essential(x0, x1, K0, K1, threshold=1.0) is None
+
+
 def test_pose_from_fundamental():
     rng = np.random.default_rng(2)
     K0, K1, R, t, x0, x1 = _synthetic_two_view(rng)
