@@ -12,8 +12,8 @@ Variants, all on the images shrunk to ``--max-side`` px on the longer side:
   their positions, then LightGlue / mutual NN as above.
 - ``union-lg``: ALIKED's keypoints and the hybrid's together, LightGlue.
 
-Each is scored by the datasets' protocols as ``slime bench`` scores them (OpenCV MAGSAC++ at 3 px, 10,000
-iterations; mAA of the given order and the mean over 10 orders of the matches). The summary is the mean over
+Each is scored by the datasets' protocols as ``slime bench`` scores them, at its defaults (``BenchConfig``:
+OpenCV MAGSAC++ at 3 px, 10,000 iterations; mAA of the given order and the mean over 10 orders of the matches). The summary is the mean over
 the pairs of each set.
 """
 
@@ -27,8 +27,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from slime_match.eval.bench_config import BenchConfig
 from slime_match.eval.datasets.load import load_dataset
-from slime_match.eval.metrics.protocols import evd_protocol, wxbs_protocol
+from slime_match.eval.scoring import evaluate_protocol, pair_gt
 from slime_match.io import load_image
 from slime_match.pipelines import BaseConfig
 from slime_match.pipelines.learned import unit_frames
@@ -36,7 +37,6 @@ from slime_match.pipelines.registry import make_base_pipeline
 from slime_match.resize import resize_image, working_factor
 from slime_match.types import Features
 
-THRESHOLD, ITERATIONS, ORDERS, EVD_STEP = 3.0, 10_000, 10, 2  # the protocols as ``slime bench`` runs them
 VARIANTS = ("aliked-lg", "aliked-nn", "hz+", "hybrid-lg", "hybrid-nn", "union-lg")
 
 
@@ -80,15 +80,6 @@ class Variants:
         return out
 
 
-def scored(pair, protocol: str, x0: np.ndarray, x1: np.ndarray, shapes) -> dict[str, float | int]:
-    """The protocol's mAA (given order) and its mean over the orders, with the number of matches."""
-    if protocol == "evd":
-        result = evd_protocol(x0, x1, pair.H, *shapes, THRESHOLD, ITERATIONS, EVD_STEP, ORDERS)
-    else:
-        result = wxbs_protocol(x0, x1, pair.corrs, THRESHOLD, ITERATIONS, ORDERS)
-    return {"matches": len(x0), "maa": result["maa"], "maa_mean": result["maa_mean"]}
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("hard", type=Path, help="a folder holding wxbs/ and evd/ in the datasets' formats")
@@ -96,7 +87,7 @@ def main() -> None:
     parser.add_argument("--keypoints", type=int, default=4096, help="at most this many keypoints per image")
     parser.add_argument("--out", type=Path, default=Path("results/hybrid_descriptors.json"))
     args = parser.parse_args()
-    variants = Variants(args.keypoints)
+    variants, config = Variants(args.keypoints), BenchConfig()
     pairs: dict[str, dict] = {}
     for protocol in ("wxbs", "evd"):
         for pair in load_dataset(f"{protocol}:{args.hard / protocol}"):
@@ -107,10 +98,11 @@ def main() -> None:
             start = time.perf_counter()
             found = variants.matches(image0, image1)
             seconds = time.perf_counter() - start
-            shapes = originals[0].shape[:2], originals[1].shape[:2]
+            raw = {name: (frame0.to_original(x0), frame1.to_original(x1)) for name, (x0, x1) in found.items()}
+            scores = evaluate_protocol(protocol, pair_gt(pair, originals), raw, config)
             key = f"{protocol}/{pair.name}"
-            pairs[key] = {name: scored(pair, protocol, frame0.to_original(x0), frame1.to_original(x1), shapes)
-                          for name, (x0, x1) in found.items()}
+            pairs[key] = {name: {"matches": len(raw[name][0]), "maa": result["maa"], "maa_mean": result["maa_mean"]}
+                          for name, result in scores.items()}
             print(key, f"{seconds:.1f} s", json.dumps({k: [v["matches"], round(v["maa"], 3), round(v["maa_mean"], 3)]
                                                       for k, v in pairs[key].items()}), flush=True)
     summary = {protocol: {name: {k: float(np.mean([p[name][k] for key, p in pairs.items()
@@ -118,7 +110,8 @@ def main() -> None:
                           for name in VARIANTS} for protocol in ("wxbs", "evd")}
     for protocol, rows in summary.items():
         for name, row in rows.items():
-            print(f"{protocol} {name}: mAA {row['maa']:.3f}, over {ORDERS} orders {row['maa_mean']:.3f}")
+            print(f"{protocol} {name}: mAA {row['maa']:.3f}, over {config.protocol_orders} orders "
+                  f"{row['maa_mean']:.3f}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"max_side": args.max_side, "keypoints": args.keypoints, "pairs": pairs,
                                     "summary": summary}, indent=1) + "\n")
