@@ -14,7 +14,7 @@ from slime_match.config import make_config
 from slime_match.errors import ConfigError
 from slime_match.geometry.frames import Frame
 from slime_match.pipelines import make_base_pipeline
-from slime_match.quarter_turns import check_quarter_turns, turned_frame
+from slime_match.quarter_turns import check_quarter_turns, chosen_turn, turned_frame
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -57,6 +57,21 @@ def test_the_check_reads_the_turn_back(k):
     taken = turn.inliers[turn.quarter_turns]
     assert all(taken >= 2 * n for i, n in enumerate(turn.inliers) if i != turn.quarter_turns), turn
     assert turn.as_dict()["degrees"] == 90 * turn.quarter_turns and "consistent matches" in turn.reason
+
+
+@pytest.mark.parametrize(("inliers", "turn"), [
+    ((242, 21, 9, 10), 0),  # an upright planar pair
+    ((10, 20, 12, 8), 0),  # a hard upright pair: every reading under the floor
+    ((0, 39, 0, 0), 0),  # under the floor
+    ((30, 59, 0, 0), 0),  # under twice a weak upright reading
+    ((30, 60, 0, 0), 1),
+    ((0, 3, 72, 0), 2),
+    ((127, 180, 16, 8), 1),  # a base partly following the turn: above the floor a lead of 40 suffices
+    ((100, 139, 0, 0), 0),  # a lead under 40
+    ((100, 0, 0, 140), 3),
+])
+def test_a_turn_is_taken_only_as_the_clear_winner(inliers, turn):
+    assert chosen_turn(inliers) == turn
 
 
 def test_slime_on_aliked_matches_a_turned_pair_as_the_upright_one():

@@ -5,16 +5,20 @@ degrees their matcher finds next to nothing, and Slime's orientation re-run (Sec
 matches to read orientations from. Before Slime runs on such a base, the base matches small copies of the two
 images (longer side :data:`CHECK_SIDE` px, the :data:`CHECK_KEYPOINTS` strongest keypoints) with image 1 under
 each quarter turn, and counts the matches one fundamental matrix explains (OpenCV MAGSAC++,
-:data:`CHECK_THRESHOLD` px). A turn replaces the upright reading only when it is the clear winner: at least
-twice the upright's consistent matches and at least :data:`MIN_TURN_INLIERS` of them. Wrong turns of upright
-pairs reach a few to about 30 consistent matches at this size (a fundamental matrix explains some of any few
-dozen matches), the right turn of a planar pair hundreds; the floor keeps a hard upright pair whose every
-reading is weak upright. Slime then matches image 1 turned, and the matches come back in its own pixels
-(``Frame.view`` holds the turn).
+:data:`CHECK_THRESHOLD` px). A turn replaces the upright reading only when it is the clear winner
+(:func:`chosen_turn`): the most consistent matches, at least :data:`MIN_TURN_INLIERS` of them, and a lead over
+the upright reading of as many as the upright has (twice its count) or :data:`MIN_TURN_INLIERS`, whichever is
+less. Wrong turns of upright pairs reach a few to about 35 consistent matches at this size (a fundamental matrix
+explains some of any few dozen matches), the right turn of a planar pair hundreds; the floor keeps a hard
+upright pair whose every reading is weak upright. An upright reading above the floor is no noise but the base
+partly following the turn (ALIKED on graf 1->4 with image 1 turned by 90 degrees clockwise: 127 upright, 180
+under the right turn), so there a lead of :data:`MIN_TURN_INLIERS`, more than a wrong reading reaches, suffices.
+Slime then matches image 1 turned, and the matches come back in its own pixels (``Frame.view`` holds the turn).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
 import cv2
@@ -27,8 +31,7 @@ from .types import Features
 CHECK_SIDE = 384  # px, longer side of the images the check matches
 CHECK_KEYPOINTS = 512  # strongest keypoints per image in the check
 CHECK_THRESHOLD = 2.0  # px at CHECK_SIDE, MAGSAC++'s inlier threshold
-MIN_TURN_INLIERS = 40  # consistent matches a turn needs (besides twice the upright's) to be taken
-TURN_FACTOR = 2.0  # how many times the upright's consistent matches a turn needs
+MIN_TURN_INLIERS = 40  # consistent matches a turn needs, and the most lead over the upright's it needs
 
 
 @dataclass(frozen=True)
@@ -62,15 +65,24 @@ def check_quarter_turns(pipeline, image0: np.ndarray, image1: np.ndarray, seed: 
         xy0 = features0.xy.detach().cpu().numpy().astype(np.float64)[matches.idx0]
         xy1 = features1.xy.detach().cpu().numpy().astype(np.float64)[matches.idx1]
         inliers.append(_consistent(xy0, xy1, seed))
-    best = int(np.argmax(inliers))
-    taken = best != 0 and inliers[best] >= max(TURN_FACTOR * inliers[0], MIN_TURN_INLIERS)
+    turn = chosen_turn(inliers)
     counts = ", ".join(f"{90 * k} deg {n}" for k, n in enumerate(inliers))
-    if taken:
-        reason = (f"image 1 turned by {90 * best} degrees: its matches agree most there ({counts} consistent "
+    if turn:
+        reason = (f"image 1 turned by {90 * turn} degrees: its matches agree most there ({counts} consistent "
                   "matches of a small copy)")
     else:
         reason = f"upright: no turn is a clear winner ({counts} consistent matches of a small copy)"
-    return QuarterTurn(best if taken else 0, tuple(inliers), reason)  # type: ignore[arg-type]
+    return QuarterTurn(turn, tuple(inliers), reason)  # type: ignore[arg-type]
+
+
+def chosen_turn(inliers: Sequence[int]) -> int:
+    """The quarter turn (0-3) that the check's readings choose: ``inliers`` (4,) consistent matches under 0, 1,
+    2 and 3 quarter turns. The turn with the most, when it holds at least :data:`MIN_TURN_INLIERS` and leads the
+    upright reading by ``min(upright, MIN_TURN_INLIERS)``; else 0 (upright)."""
+    best = int(np.argmax(inliers))
+    upright = inliers[0]
+    lead = inliers[best] - upright
+    return best if best != 0 and inliers[best] >= MIN_TURN_INLIERS and lead >= min(upright, MIN_TURN_INLIERS) else 0
 
 
 def turned_frame(frame: Frame, original_size: tuple[int, int], quarter_turns: int) -> Frame:
