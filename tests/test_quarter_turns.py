@@ -6,13 +6,14 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from conftest import require_learned_weights, rotated_astronaut
+from conftest import DATA, require, require_learned_weights, rotated_astronaut
 from scipy.spatial import cKDTree
 
 import slime_match as sm
 from slime_match.config import make_config
 from slime_match.errors import ConfigError
 from slime_match.geometry.frames import Frame
+from slime_match.io import load_image
 from slime_match.pipelines import make_base_pipeline
 from slime_match.quarter_turns import check_quarter_turns, chosen_turn, turned_frame
 
@@ -72,6 +73,18 @@ def test_the_check_reads_the_turn_back(k):
 ])
 def test_a_turn_is_taken_only_as_the_clear_winner(inliers, turn):
     assert chosen_turn(inliers) == turn
+
+
+def test_the_check_turns_back_a_pair_the_base_partly_follows_turned():
+    """Graf 1->4 with image 1 turned 90 degrees clockwise: ALIKED + LightGlue partly follow the turn of this
+    foreshortened view, so the upright reading passes the floor, yet the turn back leads it by more than 40."""
+    require_learned_weights("aliked-n16", "lightglue-aliked")
+    graf = require(DATA / "oxford_graf")
+    image0, image1 = load_image(graf / "img1.png"), load_image(graf / "img4.png")
+    pipeline = make_base_pipeline(make_config("slime-aliked").base, torch.device("cpu"))
+    turn = check_quarter_turns(pipeline, image0, np.ascontiguousarray(np.rot90(image1, 3)))
+    assert turn.quarter_turns == 1, turn
+    assert turn.inliers[0] > 40, turn  # the case the lead rule is for
 
 
 def test_slime_on_aliked_matches_a_turned_pair_as_the_upright_one():
