@@ -4,11 +4,9 @@ This is not a quality test (the quality gates in ``tests/quality`` compare the m
 tells that a change of the code's structure left the outputs as they were. Each case runs a matcher on the
 CPU and compares with ``data/identical_matches.json``:
 
-* exactly, the number of matches and the integer and boolean arrays of ``--save-stages`` (indices, tiles,
-  flags) by digest; the stage counts within ``COUNT_RTOL``: an intermediate quantity that sits on a float
-  threshold can fall the other side on another CPU (graf's plane memberships: 1,812,933 on one x86-64 CPU,
-  1,813,725 on another, 0.04% apart, with the same final matches), and a stage array whose length moved
-  that way is compared by its length alone;
+* where the run takes the recording's decisions (every stage count and the number of matches as recorded):
+  exactly, the integer and boolean arrays of ``--save-stages`` (indices, tiles, flags) by digest, and a stage
+  array of another length within ``COUNT_RTOL`` by its length alone;
 * the final matches' keypoints in one order, by their keypoints: they come sorted by score, and where two
   scores nearly tie their order flips between CPUs (the keypoints agreed to the bit on the x86-64 CPUs
   measured);
@@ -29,6 +27,14 @@ CPU and compares with ``data/identical_matches.json``:
   distribution stays (the motorcycle pair's Key.Net scores on an x86-64 CPU with AVX-512: the same sorted
   values to 2e-3 of the largest, sums 0.0085 apart against a norm of 0.23, signed projections of the unsorted
   scores 0.032 apart).
+
+Where a float difference moved a decision, the matches after it move too: a quantity that sits on a float
+threshold falls the other side on another CPU (graf's plane memberships: 1,812,933 on one x86-64 CPU,
+1,813,725 on another, 0.04% apart, with the same final matches; with oneDNN held to AVX2 one block match of
+41,046 changes, then 14,670 final matches instead of 14,656). Then every stage count must stay within
+``CASCADE_RTOL`` (or 2) of the recording, and the final keypoints and scores keep their length and order
+statistics to ``CASCADE_RTOL``: a cascade from a last-bit difference stays within that, a changed method does
+not.
 
 A change that alters the matches on purpose re-records the fixture:
 
@@ -97,6 +103,7 @@ def load_pair(name: str) -> tuple[np.ndarray, np.ndarray]:
 COUNT_RTOL = 2e-3
 FLOAT_RTOL = 1e-4  # of an array's scale: its L2 norm for the sums, its largest |value| for single values
 SCORE_RTOL = 0.1  # the same for the final scores (see module doc)
+CASCADE_RTOL = 0.01  # after a moved decision: counts, lengths, and order statistics of the largest |value|
 N_PROJECTIONS = 8
 N_VALUES = 65
 
@@ -146,9 +153,9 @@ def canonical_rows(name: str, array: np.ndarray) -> np.ndarray:
     return rows[np.lexsort(rows.T[::-1])] if rows.shape[1] else rows
 
 
-def counts_close(got: int, expected: int) -> bool:
-    """Whether a count is within ``COUNT_RTOL`` of its recorded value (exact below 500)."""
-    return abs(got - expected) <= COUNT_RTOL * abs(expected)
+def counts_close(got: int, expected: int, rtol: float = COUNT_RTOL) -> bool:
+    """Whether a count is within ``rtol`` of its recorded value (and within 2 of it where that is more)."""
+    return abs(got - expected) <= max(rtol * abs(expected), 2)
 
 
 def differs(got: dict, expected: dict, rtol: float = FLOAT_RTOL) -> str | None:
@@ -182,17 +189,33 @@ def outputs(case: str) -> dict:
             "counts": result.summary.get("counts", {})}
 
 
+def cascade_differs(got: dict, expected: dict) -> str | None:
+    """Why two fingerprints of a final output differ beyond a cascade (see module doc), or None: the length
+    within ``CASCADE_RTOL``, the order statistics but the smallest and the largest (one match each: graf's
+    worst score moves by 0.15 of 1.35 with oneDNN held to AVX2) within ``CASCADE_RTOL`` of the largest |value|."""
+    if not counts_close(got["shape"][0], expected["shape"][0], CASCADE_RTOL):
+        return f"length {got['shape'][0]} != {expected['shape'][0]}"
+    gap = np.abs(np.subtract(got["order"][1:-1], expected["order"][1:-1])).max(initial=0.0)
+    if gap > CASCADE_RTOL * expected["max_abs"] + 1e-12:
+        return f"order statistics differ by {gap:.3g} > {CASCADE_RTOL:g} x {expected['max_abs']:.3g}"
+    return None
+
+
 @pytest.mark.parametrize("case", list(CASES))
 def test_matches_identical_to_recorded(case):
     expected = json.loads(FIXTURE.read_text())[case]
     got = outputs(case)
     assert set(got["counts"]) == set(expected["counts"])
-    moved = {k: (got["counts"][k], v) for k, v in expected["counts"].items() if not counts_close(got["counts"][k], v)}
-    assert not moved, moved
-    assert got["matches"] == expected["matches"]
     assert set(got["arrays"]) == set(expected["arrays"])
-    changed = {k: why for k in sorted(expected["arrays"])
-               if (why := differs(got["arrays"][k], expected["arrays"][k], SCORE_RTOL if k == "scores" else FLOAT_RTOL))}
+    if got["counts"] == expected["counts"] and got["matches"] == expected["matches"]:  # the recording's decisions
+        changed = {k: why for k in sorted(expected["arrays"]) if (why := differs(
+            got["arrays"][k], expected["arrays"][k], SCORE_RTOL if k == "scores" else FLOAT_RTOL))}
+    else:  # a float difference moved a decision, and the matches after it
+        moved = {k: (got["counts"][k], v) for k, v in expected["counts"].items()
+                 if not counts_close(got["counts"][k], v, CASCADE_RTOL)}
+        assert not moved, moved
+        changed = {k: why for k in ("keypoints0", "keypoints1", "scores")
+                   if (why := cascade_differs(got["arrays"][k], expected["arrays"][k]))}
     assert not changed, changed
 
 
@@ -217,6 +240,18 @@ def test_fingerprint_tolerates_rounding_and_catches_a_moved_match():
     with_nan = keypoints.copy()
     with_nan[0, 0] = np.nan
     assert differs(fingerprint(with_nan), recorded).startswith("non-finite")
+
+
+def test_a_cascade_passes_and_a_changed_output_does_not():
+    """A few matches replaced and a few more passes the check after a moved decision; a tenth of the matches
+    lost, or every keypoint stretched by 2%, does not."""
+    rng = np.random.default_rng(2)
+    keypoints = rng.uniform(0, 400, (14000, 2))
+    recorded = fingerprint(keypoints)
+    cascade = np.vstack([keypoints[40:], rng.uniform(0, 400, (60, 2))])
+    assert cascade_differs(fingerprint(cascade), recorded) is None
+    assert cascade_differs(fingerprint(keypoints[:12600]), recorded).startswith("length")
+    assert cascade_differs(fingerprint(keypoints * 1.02), recorded).startswith("order")
 
 
 def test_canonical_rows_forget_the_row_order_and_a_homography_scale_but_not_a_moved_row():
