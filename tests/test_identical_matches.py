@@ -2,10 +2,10 @@
 
 This is not a quality test (the quality gates in ``tests/quality`` compare the matches with ground truth): it
 tells that a change of the code's structure left the outputs as they were. Each case runs a matcher on the
-CPU and compares with ``data/identical_matches.json``:
+CPU and compares with ``data/identical_matches.json``. Where the run takes the recording's decisions (every
+stage count and the number of matches as recorded):
 
-* where the run takes the recording's decisions (every stage count and the number of matches as recorded):
-  exactly, the integer and boolean arrays of ``--save-stages`` (indices, tiles, flags) by digest, and a stage
+* exactly, the integer and boolean arrays of ``--save-stages`` (indices, tiles, flags) by digest, and a stage
   array of another length within ``COUNT_RTOL`` by its length alone;
 * the final matches' keypoints in one order, by their keypoints: they come sorted by score, and where two
   scores nearly tie their order flips between CPUs (the keypoints agreed to the bit on the x86-64 CPUs
