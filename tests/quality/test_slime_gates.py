@@ -29,11 +29,11 @@ EVD = {  # extreme viewpoints: adam and shop are solved by the image's own plane
     "evd/adam": {"correct": 1964, "precision": 0.819, "maa": 0.867},
     "evd/shop": {"correct": 615, "precision": 0.911, "maa": 1.0},
     # image 1's views; without views: 12, mAA 0. Dum's matches move between CPUs as between seeds (399 correct,
-    # mAA over 10 orders 0.36, at seed 0 on an AMD EPYC with AVX-512, whose 399 the CPU of the other gates also
-    # gave; 441 / 423 / 379 correct, mAA 0.60 / 0.62 / 0.48, at seeds 0 / 1 / 2 on another AMD EPYC; each
-    # `predict` + `evaluate_protocol` as measure() runs them, with make_method(SLIME, seed=S)): its gate takes
-    # the lowest
-    "evd/dum": {"correct": 379, "precision": 0.455, "maa": 0.36},
+    # precision 0.455, mAA over 10 orders 0.36, at seed 0 on an AMD EPYC with AVX-512, whose 399 the CPU of the
+    # other gates also gave; there with oneDNN held to AVX2 (ONEDNN_MAX_CPU_ISA=AVX2) 329, 0.422, 0.61; 441 /
+    # 423 / 379 correct, mAA 0.60 / 0.62 / 0.48, at seeds 0 / 1 / 2 on another AMD EPYC; each `predict` +
+    # `evaluate_protocol` as measure() runs them, with make_method(SLIME, seed=S)): its gate takes the lowest
+    "evd/dum": {"correct": 329, "precision": 0.422, "maa": 0.36},
 }
 WXBS = {  # wide baseline with appearance and lighting change; mAA = mean recall of the GT correspondences
     "wxbs/zanky": {"correct": 415, "precision": 0.950, "maa": 0.56},
@@ -44,13 +44,15 @@ WXBS = {  # wide baseline with appearance and lighting change; mAA = mean recall
 # (155 s against 33 s), so its gate runs the plain run; the views step's policy has tests of its own
 # (tests/slime/test_view_step.py) and EVD dum's gate runs views that are kept.
 PLAIN_RUN = {"wxbs/kyiv_dolltheater2"}
-SCANNET = {  # indoor pairs at 640 x 480; correct = consistent with the GT epipolar geometry
+SCANNET = {  # indoor pairs at 640 x 480; correct = consistent with the GT epipolar geometry; pair 4's precision
+    # and the pose AUC the lower of two float behaviours (an AMD EPYC with AVX-512, alone and with oneDNN held to
+    # AVX2: 0.911 and 0.874; 0.456 and 0.314, with pose errors of 9.5, 10.7, 51.6 and 46.7 degrees there)
     "scannet/0": {"correct": 535, "precision": 0.817},
     "scannet/1": {"correct": 301, "precision": 0.798},
     "scannet/3": {"correct": 227, "precision": 0.772},
-    "scannet/4": {"correct": 472, "precision": 0.911},
+    "scannet/4": {"correct": 472, "precision": 0.874},
 }
-SCANNET_POSE_AUC20 = 0.456  # AUC@20 degrees of the four pairs' pose errors (1 px essential RANSAC)
+SCANNET_POSE_AUC20 = 0.314  # AUC@20 degrees of the four pairs' pose errors (1 px essential RANSAC)
 
 
 @pytest.fixture(autouse=True)
@@ -66,7 +68,7 @@ def test_slime_keeps_its_measured_quality(pair):
 
 
 def test_slime_solves_the_extreme_viewpoint_pairs():
-    """All three EVD pairs solved (mAA > 0), their mean mAA at 85% of the measured 0.782."""
+    """All three EVD pairs solved (mAA > 0), their mean mAA at 85% of the mean of their gates' values."""
     maa = [measure(SLIME, pair).maa for pair in EVD]
     assert all(m > 0 for m in maa) and np.mean(maa) >= COUNT_MARGIN * np.mean([v["maa"] for v in EVD.values()]), maa
 
