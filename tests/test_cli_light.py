@@ -11,6 +11,7 @@ from conftest import run_cli
 
 from slime_match import __version__, choices
 from slime_match.cli import build_parser
+from slime_match.cli.match_options import config_of
 
 HEAVY = ("torch", "numba", "cv2", "kornia", "scipy", "matplotlib", "numpy", "ray")
 WEIGHT_FREE = ["--shape", "baumberg", "--orientation", "gradient", "--descriptor", "rootsift"]
@@ -49,6 +50,10 @@ def test_the_parser_offers_what_the_code_accepts():
     assert set(methods()) <= set(PRESETS)  # Slime and every base alone, by its name
     assert offered["base"] == BASE_NAMES
     assert offered["detection"] == choices.DETECTIONS and offered["tile_test"] == choices.TILE_TESTS
+    assert offered["rotation_fallback"] == offered["quarter_turns"] == ("auto", "off")
+    args = build_parser().parse_args(["match", "a.png", "b.png", "-o", "out", "--method", "slime-aliked",
+                                      "--rotation-fallback", "off"])
+    assert config_of(args).rotation_fallback == "off"
 
 
 def test_bench_names_no_development_folder(capsys):

@@ -19,7 +19,7 @@ from typing import Any
 
 from ._runtime.options import check_choice, check_integer, config_from_dict, set_option
 from .auto_method import AUTO_PRESETS, resolve_auto
-from .choices import DEVICES, LEARNED_BASES, QUARTER_TURN_MODES, RANSAC_CHOICES
+from .choices import DEVICES, LEARNED_BASES, QUARTER_TURN_MODES, RANSAC_CHOICES, ROTATION_FALLBACK_MODES
 from .errors import ConfigError
 from .io import MIN_IMAGE_SIDE
 from .pipelines import PIPELINES, BaseConfig, base_names, unimplemented
@@ -72,6 +72,9 @@ class MatchConfig:
         quarter_turns: "auto" (default): Slime on a base whose features are upright by design (ALIKED n16/n32,
             DISK, XFeat) first checks which quarter turn of image 1 its matches agree with most, and matches
             image 1 turned when one is the clear winner (:mod:`slime_match.quarter_turns`); "off": never.
+        rotation_fallback: "auto" (default): where Slime on a base upright by design finds no match (images
+            rolled against each other by other than quarter turns), Slime runs again on Hz+, which estimates
+            orientations, and its matches are returned (:mod:`slime_match.rotation_fallback`); "off": never.
         auto_choice: what the "auto" method took and what it passed over (:mod:`slime_match.auto_method`);
             empty when a preset was named.
     """
@@ -87,6 +90,7 @@ class MatchConfig:
     max_side: int | str | None = "auto"
     views: ViewConfig = field(default_factory=ViewConfig)
     quarter_turns: str = "auto"
+    rotation_fallback: str = "auto"
     auto_choice: str = ""
 
     def __post_init__(self) -> None:
@@ -97,6 +101,7 @@ class MatchConfig:
         check_choice("ransac", self.ransac, RANSAC_CHOICES)
         check_choice("device", self.device, DEVICES)
         check_choice("quarter_turns", self.quarter_turns, QUARTER_TURN_MODES)
+        check_choice("rotation_fallback", self.rotation_fallback, ROTATION_FALLBACK_MODES)
         for name in ("min_side", "max_side"):
             value = getattr(self, name)
             if not (value in ("auto", None) or (isinstance(value, numbers.Integral) and not isinstance(value, bool)
@@ -299,7 +304,7 @@ def _refuse_unread(config: MatchConfig, given: dict[str, Any]) -> None:
         if path == "threshold" and config.ransac == "none":
             raise ConfigError("threshold is the inlier threshold of the post-processing RANSAC, and ransac is "
                               "'none': choose a RANSAC (ransac=..., --ransac) or drop the threshold")
-        if (group == "slime" or path == "quarter_turns") and not slime:
+        if (group == "slime" or path in ("quarter_turns", "rotation_fallback")) and not slime:
             raise ConfigError(f"{key!r} is a Slime option, but method {config.method!r} runs the "
                               f"{config.method} pipeline alone (use method 'slime' with base {config.method!r})")
         if group == "base" and rest and rest.split(".")[0] not in read | {"name"}:

@@ -26,6 +26,7 @@ from .pipelines.view_matching import match_views
 from .quarter_turns import check_quarter_turns, turned_frame
 from .resize import pair_factors, resize_image
 from .result import MatchResult
+from .rotation_fallback import RotationFallback
 from .slime.level_cache import LevelCache
 from .slime.pipeline import run_slime, stages_to_original
 from .slime.pooled_base import PooledBase
@@ -57,7 +58,8 @@ class Matcher:
             config: the configuration (``make_config()``'s default when None); a copy is kept.
             feature_cache_mb: memory (MiB) for Slime's block and tile features of the images matched last,
                 reused when a later pair shares an image (the matches are the same); 0 turns it off. A pooled
-                second base (``slime.pool``) gets as much again for its block features.
+                second base (``slime.pool``) gets as much again for its block features, and so does the
+                rotation fallback's base (:mod:`slime_match.rotation_fallback`) once a pair needs it.
         """
         if not feature_cache_mb >= 0:  # NaN too
             raise ConfigError(f"feature_cache_mb must be >= 0 MiB, got {feature_cache_mb}")
@@ -79,6 +81,10 @@ class Matcher:
             pool_base = dataclasses.replace(base, name=self.config.slime.pool)
             self._resolve_descriptor(pool_base)
             self.pooled = PooledBase(make_base_pipeline(pool_base, self.device), _level_cache(feature_cache_mb))
+        self.rotation_fallback = None  # Slime on a rotation-invariant base where an upright base finds no match
+        if (self.config.method == "slime" and self.config.rotation_fallback == "auto"
+                and self.pipeline.upright_by_design()):
+            self.rotation_fallback = RotationFallback(self.device, base.weights_dir, _level_cache(feature_cache_mb))
 
     def _resolve_descriptor(self, base: BaseConfig) -> None:
         """Set a descriptor "auto" of a base that reads one to the best available (a warning names what it
@@ -139,6 +145,10 @@ class Matcher:
         if config.method == "slime":
             output = run_slime(self.pipeline, array0, array1, config.slime, timer, seed=config.seed,
                                level_cache=self.level_cache, views=config.views, pooled=self.pooled)
+            if not len(output.xy0) and self.rotation_fallback is not None:
+                with timer("rotation_fallback"):
+                    output, decisions["rotation_fallback"] = self.rotation_fallback.run(
+                        output, self.pipeline.name, array0, array1, config.slime, config.seed, config.views)
             xy0, xy1, scores, counts, stages = output.xy0, output.xy1, output.scores, output.counts, output.stages
             warnings += output.warnings
             decisions |= output.decisions

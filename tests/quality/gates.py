@@ -79,11 +79,19 @@ def _method(spec: str):
 
 
 @functools.cache
+def prediction(spec: str, name: str) -> dict:
+    """Method ``spec``'s prediction on pair ``name`` (``eval.predictions.predict``'s arrays, seconds and
+    decisions), computed once."""
+    pair = load_pair(name)
+    return predict(_method(spec), pair, load_pair_images(pair))
+
+
+@functools.cache
 def measure(spec: str, name: str) -> Row:
     """The :class:`Row` of method ``spec`` on pair ``name`` (see :func:`load_pair`), computed once."""
     pair = load_pair(name)
     images = load_pair_images(pair)
-    pred = predict(_method(spec), pair, images)
+    pred = prediction(spec, name)
     raw = {spec: (pred["keypoints0"], pred["keypoints1"])}
     gt = pair_gt(pair, images)
     metrics = evaluate_pair(gt, raw, SCORING)[0][spec]["none"]

@@ -324,12 +324,15 @@ def test_the_decisions_of_a_run_read_as_lines():
                        {"image": 1, "tilt": 2.0, "views": 5, "planes": 9, "support": 150, "on_views": 145,
                         "ftheta_matches": 140,
                         "ftheta_by_angle": {"0": 100, "36": 40}}]}
-    lines = decision_lines({"method": "slime-aliked (its weights are cached)", "views": views, "vote": "consensus",
+    fallback = {"reason": "Slime on aliked-lg (upright by design) found no match; Slime on hz+ found 680"}
+    lines = decision_lines({"method": "slime-aliked (its weights are cached)", "rotation_fallback": fallback,
+                            "views": views, "vote": "consensus",
                             "vote_reason": "3 homographies share F", "detection": "scale", "block_matching": "levels",
                             "pool": "disk-lg: 84 block planes pooled with the base's 49",
                             "global_dtm": "image 0's own frame"})
     assert lines == [
         "method: slime-aliked (its weights are cached)",
+        "rotation fallback: Slime on aliked-lg (upright by design) found no match; Slime on hz+ found 680",
         ("simulated views (auto, of both images): kept: image 1's views: enough matches consistent with the "
          "planes' epipolar geometry (F^theta): 150 >= 100"),
         ("  image 0, tilt 2: 5 views (1 paired after their probes; best screen 22 consistent matches at 36 deg, "

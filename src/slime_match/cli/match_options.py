@@ -16,6 +16,7 @@ from ..choices import (
     ORIENTATION_CHOICES,
     QUARTER_TURN_MODES,
     RANSAC_CHOICES,
+    ROTATION_FALLBACK_MODES,
     SHAPE_METHODS,
     TILE_TESTS,
     VIEW_MODES,
@@ -85,6 +86,10 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
                            help="Slime on a base upright by design (ALIKED, DISK, XFeat): 'auto' (default) first "
                                 "checks which quarter turn of image 1 the matches agree with most and matches it "
                                 "turned when one is the clear winner; 'off': never")
+    internals.add_argument("--rotation-fallback", default=None, choices=ROTATION_FALLBACK_MODES,
+                           help="Slime on a base upright by design: 'auto' (default) runs Slime again on hz+ "
+                                "(orientation estimated) where it finds no match, as between images rolled by "
+                                "other than quarter turns, and returns those matches; 'off': never")
     everyday.add_argument("--views", default=None, choices=VIEW_MODES,
                           help="simulated views for extreme viewpoints (ASIFT tilts 2 then 4 of both images; "
                                "--set views.images=image0|image1 for one; for Slime and a base pipeline alone): "

@@ -55,13 +55,15 @@ def matches_payload(folder: Path) -> dict[str, Any]:
 
 def decision_lines(decisions: dict[str, Any]) -> list[str]:
     """``summary.json``'s ``decisions`` in words, one line each: the method ``auto`` took, the quarter turn,
-    the simulated views (the decision and why, then each step tried), Slime's epipolar vote, its block detection
-    and matching, the planes of a pooled second base, and the frame of its final DTM."""
+    the rotation fallback, the simulated views (the decision and why, then each step tried), Slime's epipolar
+    vote, its block detection and matching, the planes of a pooled second base, and the frame of its final DTM."""
     lines = []
     if "method" in decisions:
         lines.append(f"method: {decisions['method']}")
     if "quarter_turns" in decisions:
         lines.append(f"quarter turns: {decisions['quarter_turns']['reason']}")
+    if "rotation_fallback" in decisions:
+        lines.append(f"rotation fallback: {decisions['rotation_fallback']['reason']}")
     views = decisions.get("views")
     if views:
         lines.append(f"simulated views ({views['mode']}, of {_VIEWED[views.get('images', 'image0')]}): "

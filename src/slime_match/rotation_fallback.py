@@ -1,0 +1,80 @@
+"""Slime on a rotation-invariant base where Slime on a base upright by design finds no match.
+
+ALIKED (n16, n32), DISK and XFeat describe every keypoint upright. The quarter-turn check
+(:mod:`slime_match.quarter_turns`) turns image 1 back by a multiple of 90 degrees, but a roll between the images
+in between (a hand-held camera tilted sideways, 30-70 degrees) leaves such a base with no consistent matches
+at all: no plane passes the epipolar vote and Slime returns nothing. Hz+ estimates each keypoint's orientation,
+so the same pair gives it matches to read planes from. When Slime on an upright base ends with no match, the
+matcher therefore runs Slime once more on :data:`FALLBACK_BASE` (its own default options, ``descriptor``
+"auto") on the same working images, and returns that run's matches; ``summary.json``'s
+``decisions["rotation_fallback"]`` records the first run's counts and decisions, and a warning says which base
+gave the matches. A pair with no overlap runs both (the fallback's cost falls on pairs that get no match);
+``rotation_fallback="off"`` keeps the first run's empty result.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from typing import Any
+
+import numpy as np
+import torch
+
+from ._runtime.timing import StageTimer
+from .features.descriptors import AUTO_ORDER, resolve_descriptor
+from .pipelines import BaseConfig, BasePipeline, make_base_pipeline
+from .slime.level_cache import LevelCache
+from .slime.pipeline import SlimeConfig, SlimeOutput, run_slime
+from .views import ViewConfig
+
+logger = logging.getLogger("slime_match")
+
+FALLBACK_BASE = "hz+"  # orientation estimated per keypoint (OriNet), descriptor "auto"
+
+
+class RotationFallback:
+    """The rotation-invariant base of a matcher, built on first use (its weights load only when a pair needs
+    it) with a features cache of its own."""
+
+    def __init__(self, device: torch.device, weights_dir: str | None, level_cache: LevelCache | None) -> None:
+        self.device, self.weights_dir, self.level_cache = device, weights_dir, level_cache
+        self.pipeline: BasePipeline | None = None
+        self.warnings: list[str] = []  # what building the pipeline chose (the descriptor "auto" took)
+
+    def _pipeline(self) -> BasePipeline:
+        if self.pipeline is None:
+            base = BaseConfig(name=FALLBACK_BASE, weights_dir=self.weights_dir)
+            base.descriptor, warning = resolve_descriptor("auto", weights_dir=self.weights_dir,
+                                                          candidates=AUTO_ORDER)
+            if warning:
+                logger.warning(warning)
+                self.warnings.append(warning)
+            self.pipeline = make_base_pipeline(base, self.device)
+        return self.pipeline
+
+    def run(self, first: SlimeOutput, first_base: str, image0: np.ndarray, image1: np.ndarray, config: SlimeConfig,
+            seed: int, views: ViewConfig) -> tuple[SlimeOutput, dict[str, Any]]:
+        """Slime on :data:`FALLBACK_BASE` for the (H, W, 3) float working images that Slime on ``first_base``
+        matched into the empty ``first``, with ``config`` less the first base's own choices (its pooled base,
+        detection and block matching).
+
+        Returns:
+            (the fallback's output, its warnings led by one that names the base that gave the matches; the
+            record for ``decisions["rotation_fallback"]``: the bases, the reason, the first run's counts,
+            decisions and warnings).
+        """
+        pipeline = self._pipeline()
+        logger.warning("Slime on %s found no match: running Slime on %s (orientation estimated)", first_base,
+                       FALLBACK_BASE)
+        own = dataclasses.replace(config, pool=None, detection=None, block_matching=None)
+        output = run_slime(pipeline, image0, image1, own, StageTimer(), seed=seed, level_cache=self.level_cache,
+                           views=views)
+        reason = (f"Slime on {first_base} (upright by design) found no match; Slime on {FALLBACK_BASE}, which "
+                  f"estimates each keypoint's orientation, found {len(output.xy0)}")
+        given = f"{reason}: the matches are Slime on {FALLBACK_BASE}'s" if len(output.xy0) else reason
+        output.warnings[:0] = [*self.warnings, given]
+        record = {"base": FALLBACK_BASE, "first_base": first_base, "reason": reason,
+                  "pipeline": pipeline.describe(), "first_counts": first.counts,
+                  "first_decisions": first.decisions, "first_warnings": first.warnings}
+        return output, record
