@@ -26,20 +26,21 @@ def test_rotation_fallback_is_a_slime_option():
 
 
 def test_an_empty_result_of_an_upright_base_runs_slime_on_hz_plus():
-    """Image 1 blank: ALIKED finds nothing to match, so the fallback runs (and finds nothing either); its record
-    keeps the first run's counts and warnings."""
+    """Image 1 blank: ALIKED finds nothing to match, so the fallback runs, finds nothing either, and the empty
+    result stands; the record keeps the fallback's counts and warnings."""
     require_learned_weights("aliked-n16", "lightglue-aliked")
     image0, _, _ = rotated_astronaut()
     blank = np.full_like(image0, 0.5)
     result = sm.match(image0, blank, "slime-aliked", views="off", device="cpu")
     record = result.summary["decisions"]["rotation_fallback"]
-    assert len(result.scores) == 0
+    assert len(result.scores) == 0 and not record["kept"]
     assert record["base"] == FALLBACK_BASE and record["first_base"] == "aliked-lg"
-    assert record["pipeline"]["base"] == FALLBACK_BASE and record["first_counts"]["block_planes"] == 0
-    assert any("found no match" in warning for warning in record["first_warnings"])
-    assert any("Slime on hz+, which estimates each keypoint's orientation, found 0" in warning
-               for warning in result.summary["warnings"])
-    assert result.summary["seconds"]["rotation_fallback"] > 0
+    assert record["pipeline"]["base"] == FALLBACK_BASE
+    other = record["other_run"]
+    assert other["base"] == FALLBACK_BASE and other["counts"]["ftheta_matches"] == 0
+    assert any("found no match" in warning for warning in other["warnings"])
+    assert "holds 0 matches in F^theta (< views.min_support 100" in result.summary["warnings"][-1]
+    assert result.summary["counts"]["block_planes"] == 0 and result.summary["seconds"]["rotation_fallback"] > 0
     json.dumps(result.summary)  # the record is part of summary.json
 
     off = sm.match(image0, blank, "slime-aliked", views="off", device="cpu", rotation_fallback="off")

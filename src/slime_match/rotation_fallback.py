@@ -6,10 +6,11 @@ in between (a hand-held camera tilted sideways, 30-70 degrees) leaves such a bas
 at all: no plane passes the epipolar vote and Slime returns nothing. Hz+ estimates each keypoint's orientation,
 so the same pair gives it matches to read planes from. When Slime on an upright base ends with no match, the
 matcher therefore runs Slime once more on :data:`FALLBACK_BASE` (its own default options, ``descriptor``
-"auto") on the same working images, and returns that run's matches; ``summary.json``'s
-``decisions["rotation_fallback"]`` records the first run's counts and decisions, and a warning says which base
-gave the matches. A pair with no overlap runs both (the fallback's cost falls on pairs that get no match);
-``rotation_fallback="off"`` keeps the first run's empty result.
+"auto") on the same working images, and returns that run's matches when its F^theta holds
+``views.min_support`` matches, the consistent geometry by which Slime needs no views; a pair that shares nothing
+keeps its empty result, after both runs. ``summary.json``'s ``decisions["rotation_fallback"]`` records the
+decision and the other run's counts, decisions and warnings, and a warning says which base gave the matches;
+``rotation_fallback="off"`` keeps the first run's empty result without the second run.
 """
 
 from __future__ import annotations
@@ -57,24 +58,37 @@ class RotationFallback:
             seed: int, views: ViewConfig) -> tuple[SlimeOutput, dict[str, Any]]:
         """Slime on :data:`FALLBACK_BASE` for the (H, W, 3) float working images that Slime on ``first_base``
         matched into the empty ``first``, with ``config`` less the first base's own choices (its pooled base,
-        detection and block matching).
+        detection and block matching). Its matches are taken when its F^theta holds ``views.min_support``
+        matches (the consistent geometry by which Slime needs no views); below that they are mostly wrong
+        (pairs that share nothing reach 15-21) and the empty result stands.
 
         Returns:
-            (the fallback's output, its warnings led by one that names the base that gave the matches; the
-            record for ``decisions["rotation_fallback"]``: the bases, the reason, the first run's counts,
-            decisions and warnings).
+            (the output taken, with a warning that names the base that gave its matches; the record for
+            ``decisions["rotation_fallback"]``: the bases, whether the fallback was kept and why, and the other
+            run's counts, decisions and warnings).
         """
         pipeline = self._pipeline()
         logger.warning("Slime on %s found no match: running Slime on %s (orientation estimated)", first_base,
                        FALLBACK_BASE)
         own = dataclasses.replace(config, pool=None, detection=None, block_matching=None)
-        output = run_slime(pipeline, image0, image1, own, StageTimer(), seed=seed, level_cache=self.level_cache,
+        second = run_slime(pipeline, image0, image1, own, StageTimer(), seed=seed, level_cache=self.level_cache,
                            views=views)
+        second.warnings[:0] = self.warnings
+        support = second.counts["ftheta_matches"]
+        kept = support >= views.min_support
         reason = (f"Slime on {first_base} (upright by design) found no match; Slime on {FALLBACK_BASE}, which "
-                  f"estimates each keypoint's orientation, found {len(output.xy0)}")
-        given = f"{reason}: the matches are Slime on {FALLBACK_BASE}'s" if len(output.xy0) else reason
-        output.warnings[:0] = [*self.warnings, given]
-        record = {"base": FALLBACK_BASE, "first_base": first_base, "reason": reason,
-                  "pipeline": pipeline.describe(), "first_counts": first.counts,
-                  "first_decisions": first.decisions, "first_warnings": first.warnings}
-        return output, record
+                  f"estimates each keypoint's orientation, holds {support} matches in F^theta ")
+        if kept:
+            reason += f"(>= views.min_support {views.min_support}): its {len(second.xy0)} matches are returned"
+            taken, other, other_base = second, first, first_base
+            taken.warnings.insert(len(self.warnings), reason)
+        else:
+            reason += f"(< views.min_support {views.min_support}, too little consistent geometry): no match"
+            taken, other, other_base = first, second, FALLBACK_BASE
+            taken.warnings.append(reason)
+        logger.info("Rotation fallback: %s", reason)
+        record = {"base": FALLBACK_BASE, "first_base": first_base, "kept": kept, "reason": reason,
+                  "pipeline": pipeline.describe(),
+                  "other_run": {"base": other_base, "counts": other.counts, "decisions": other.decisions,
+                                "warnings": other.warnings}}
+        return taken, record
