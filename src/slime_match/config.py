@@ -74,7 +74,8 @@ class MatchConfig:
             image 1 turned when one is the clear winner (:mod:`slime_match.quarter_turns`); "off": never.
         rotation_fallback: "auto" (default): where Slime on a base upright by design finds no match (images
             rolled against each other by other than quarter turns), Slime runs again on Hz+, which estimates
-            orientations, and its matches are returned (:mod:`slime_match.rotation_fallback`); "off": never.
+            orientations, and its matches are returned where its F^theta holds ``views.min_support`` matches
+            (:mod:`slime_match.rotation_fallback`); "off": never.
         auto_choice: what the "auto" method took and what it passed over (:mod:`slime_match.auto_method`);
             empty when a preset was named.
     """

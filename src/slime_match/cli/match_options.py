@@ -89,7 +89,8 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
     internals.add_argument("--rotation-fallback", default=None, choices=ROTATION_FALLBACK_MODES,
                            help="Slime on a base upright by design: 'auto' (default) runs Slime again on hz+ "
                                 "(orientation estimated) where it finds no match, as between images rolled by "
-                                "other than quarter turns, and returns those matches; 'off': never")
+                                "other than quarter turns, and returns those matches where they hold consistent "
+                                "geometry (views.min_support); 'off': never")
     everyday.add_argument("--views", default=None, choices=VIEW_MODES,
                           help="simulated views for extreme viewpoints (ASIFT tilts 2 then 4 of both images; "
                                "--set views.images=image0|image1 for one; for Slime and a base pipeline alone): "
