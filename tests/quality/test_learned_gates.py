@@ -8,8 +8,9 @@ of the measured value, precision stays within 3 points. The pairs: a planar view
 or level with ALIKED alone) whose mAA moved by at most 0.03 over RANSAC seeds 0, 1 and 2 (zanky moved by 0.28,
 tyn by 0.59: such pairs would make a gate of chance); graf 1->3 with image 1 turned by 90 degrees, which the
 quarter-turn check turns back; a ScanNet pair rolled by 72 degrees, where Slime on ALIKED finds no match and
-the rotation fallback's Slime on Hz+ gives the matches; and EVD shop, solved by image 0's tilt-2 views (mAA 0.93 at seeds 0, 1 and 2,
-1284-1306 correct; 0.40 with the views off), the simulated views of the default method.
+the rotation fallback's Slime on Hz+ gives the matches; and EVD shop, solved by image 0's tilt-2 views (mAA
+0.93 at seeds 0, 1 and 2, 1284-1306 correct; 0.40 with the views off), the simulated views of the default
+method.
 
 Measured with ``python tests/quality/gates.py METHOD PAIR ...`` on a 2-core x86-64 CPU.
 """
