@@ -52,4 +52,3 @@ def test_slime_on_hz_plus_takes_no_fallback():
     blank = np.full_like(image1, 0.5)
     result = sm.match(image0, blank, "slime", descriptor="rootsift", views="off", device="cpu")
     assert len(result.scores) == 0 and "rotation_fallback" not in result.summary["decisions"]
-

@@ -9,7 +9,7 @@ matcher therefore runs Slime once more on :data:`FALLBACK_BASE` (its own default
 "auto") on the same working images, and returns that run's matches when its F^theta holds
 ``views.min_support`` matches, the consistent geometry by which Slime needs no views; a pair that shares nothing
 keeps its empty result, after both runs. ``summary.json``'s ``decisions["rotation_fallback"]`` records the
-decision and the other run's counts, decisions and warnings, and a warning says which base gave the matches;
+decision and the other run's counts, decisions and warnings, and a warning gives the decision;
 ``rotation_fallback="off"`` keeps the first run's empty result without the second run.
 """
 
@@ -60,10 +60,10 @@ class RotationFallback:
         matched into the empty ``first``, with ``config`` less the first base's own choices (its pooled base,
         detection and block matching). Its matches are taken when its F^theta holds ``views.min_support``
         matches (the consistent geometry by which Slime needs no views); below that they are mostly wrong
-        (pairs that share nothing reach 15-21) and the empty result stands.
+        (two ScanNet images of different scenes reach 15 and 21) and the empty result stands.
 
         Returns:
-            (the output taken, with a warning that names the base that gave its matches; the record for
+            (the output taken, with a warning that gives the decision; the record for
             ``decisions["rotation_fallback"]``: the bases, whether the fallback was kept and why, and the other
             run's counts, decisions and warnings).
         """
