@@ -17,11 +17,10 @@ from ._runtime.timing import StageTimer
 from .auto_method import passed_over
 from .config import MatchConfig, make_config
 from .errors import ConfigError, ImageError, caused_by_interrupt
-from .features.descriptors import AUTO_ORDER, resolve_descriptor
 from .geometry.backends import estimate_geometry
 from .geometry.frames import Frame
 from .io import MIN_IMAGE_SIDE, ImageLike, load_image
-from .pipelines import PIPELINES, BaseConfig, make_base_pipeline
+from .pipelines import BaseConfig, make_base_pipeline, resolve_auto_descriptor
 from .pipelines.view_matching import match_views
 from .quarter_turns import check_quarter_turns, turned_frame
 from .resize import pair_factors, resize_image
@@ -89,13 +88,9 @@ class Matcher:
     def _resolve_descriptor(self, base: BaseConfig) -> None:
         """Set a descriptor "auto" of a base that reads one to the best available (a warning names what it
         passed over)."""
-        if "descriptor" in PIPELINES[base.name].options and base.descriptor == "auto":
-            # Key.Net's pipeline describes with networks only
-            candidates = AUTO_ORDER[:-1] if base.name == "keynet" else AUTO_ORDER
-            base.descriptor, warning = resolve_descriptor("auto", weights_dir=base.weights_dir, candidates=candidates)
-            if warning:
-                logger.warning(warning)
-                self.warnings.append(warning)
+        if warning := resolve_auto_descriptor(base):
+            logger.warning(warning)
+            self.warnings.append(warning)
 
     def __repr__(self) -> str:
         """One line: the method and the choices that most change its results and speed."""

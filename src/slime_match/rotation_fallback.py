@@ -23,8 +23,7 @@ import numpy as np
 import torch
 
 from ._runtime.timing import StageTimer
-from .features.descriptors import AUTO_ORDER, resolve_descriptor
-from .pipelines import BaseConfig, BasePipeline, make_base_pipeline
+from .pipelines import BaseConfig, BasePipeline, make_base_pipeline, resolve_auto_descriptor
 from .slime.level_cache import LevelCache
 from .slime.pipeline import SlimeConfig, SlimeOutput, run_slime
 from .views import ViewConfig
@@ -46,9 +45,7 @@ class RotationFallback:
     def _pipeline(self) -> BasePipeline:
         if self.pipeline is None:
             base = BaseConfig(name=FALLBACK_BASE, weights_dir=self.weights_dir)
-            base.descriptor, warning = resolve_descriptor("auto", weights_dir=self.weights_dir,
-                                                          candidates=AUTO_ORDER)
-            if warning:
+            if warning := resolve_auto_descriptor(base):
                 logger.warning(warning)
                 self.warnings.append(warning)
             self.pipeline = make_base_pipeline(base, self.device)

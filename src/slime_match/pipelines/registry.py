@@ -16,6 +16,7 @@ import torch
 
 from ..choices import BUILTIN_BASES, LEARNED_BASES
 from ..errors import ConfigError
+from ..features.descriptors import AUTO_ORDER, resolve_descriptor
 from .base import BaseConfig, BasePipeline, unimplemented
 from .hzplus import HzPlusPipeline
 from .keynet import KeyNetPipeline
@@ -61,6 +62,16 @@ def make_base_pipeline(config: BaseConfig, device: torch.device | str = "cpu") -
     if config.name not in PIPELINES:
         raise ConfigError(f"unknown base pipeline {config.name!r}: choose one of {', '.join(base_names())}")
     return PIPELINES[config.name](config, torch.device(device))
+
+
+def resolve_auto_descriptor(config: BaseConfig) -> str | None:
+    """Set ``config.descriptor`` "auto" of a pipeline that reads one to the best descriptor available (Key.Net's
+    pipeline describes with networks only); the warning that names what it passed over, or None."""
+    if "descriptor" not in PIPELINES[config.name].options or config.descriptor != "auto":
+        return None
+    candidates = AUTO_ORDER[:-1] if config.name == "keynet" else AUTO_ORDER
+    config.descriptor, warning = resolve_descriptor("auto", weights_dir=config.weights_dir, candidates=candidates)
+    return warning
 
 
 for _name, _cls in zip(BUILTIN_BASES, (HzPlusPipeline, RootSiftPipeline, KeyNetPipeline), strict=True):
