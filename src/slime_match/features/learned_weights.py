@@ -149,7 +149,10 @@ def xfeat(max_keypoints: int, device: torch.device | str = "cpu") -> nn.Module:
 
 
 def lightglue(features: str, device: torch.device | str = "cpu") -> nn.Module:
-    """kornia's LightGlue for "aliked" or "disk" features, or LighterGlue for "xfeat"."""
+    """kornia's LightGlue for "aliked" or "disk" features, or LighterGlue for "xfeat", its cross-attention
+    fused off CUDA (:mod:`~slime_match.features.glue_attention`)."""
     import kornia.feature as KF
 
-    return load_learned(f"lightglue-{features}", lambda: KF.LightGlue(features), device)
+    from slime_match.features.glue_attention import fuse_cross_attention
+
+    return fuse_cross_attention(load_learned(f"lightglue-{features}", lambda: KF.LightGlue(features), device))
