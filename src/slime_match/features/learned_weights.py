@@ -130,8 +130,15 @@ def aliked(model: str, max_keypoints: int, threshold: float = 0.2, device: torch
 
     if model not in ALIKED_MODELS:
         raise ConfigError(f"aliked_model must be one of {', '.join(ALIKED_MODELS)}, got {model!r}")
-    return load_learned(f"aliked-{model}", lambda: KF.ALIKED.from_pretrained(
+    network = load_learned(f"aliked-{model}", lambda: KF.ALIKED.from_pretrained(
         f"aliked-{model}", max_num_keypoints=max_keypoints, detection_threshold=threshold), device)
+    if torch.device(device).type == "cpu":
+        # channels-last weights make the convolutions' outputs channels-last, and the normalisations over the
+        # channels of ALIKED's dense maps then read contiguous memory: 1.6x faster on a CPU (448 x 597 px, 0.61
+        # -> 0.38 s on two threads); the layout rounds differently, which moves about a tenth of the sub-pixel
+        # peaks, as a change of CPU does (DISK runs slower in that layout and XFeat no faster: they keep theirs)
+        network = network.to(memory_format=torch.channels_last)
+    return network
 
 
 def disk(device: torch.device | str = "cpu") -> nn.Module:
