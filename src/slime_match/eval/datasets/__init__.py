@@ -11,7 +11,7 @@ whose ``to_original`` brings coordinates back to the original frame.
 
 Modules: :mod:`.pair` (the Pair, GT geometry, rotated views), :mod:`.files` (folder reading helpers), one
 reader module per format family (:mod:`.planar`, :mod:`.wxbs`, :mod:`.pose`, :mod:`.motorcycle`) and
-:mod:`.load` (dataset specs).
+:mod:`.load` (dataset specs); :mod:`.viewpoints` writes synthetic extreme-viewpoint pairs in the EVD layout.
 """
 
 from slime_match.eval.datasets.load import default_data_root, load_dataset
