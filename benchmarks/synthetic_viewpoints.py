@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from slime_match.errors import ConfigError
 from slime_match.eval.datasets.viewpoints import write_viewpoint_set
 
 
@@ -27,8 +28,11 @@ def main() -> None:
     parser.add_argument("--max-side", type=int, default=800, help="longer side of each rendered image, px")
     args = parser.parse_args()
     sources = args.sources or [args.data / "oxford_graf" / "img1.png", *sorted(args.data.glob("hpatches/v_*/1.ppm"))]
-    records = write_viewpoint_set(sources, args.out, [float(t) for t in args.tilts.split(",")], args.seed,
-                                  args.max_side)
+    try:
+        records = write_viewpoint_set(sources, args.out, [float(t) for t in args.tilts.split(",")], args.seed,
+                                      args.max_side)
+    except (ConfigError, OSError, ValueError) as error:
+        raise SystemExit(f"error: {error}") from error
     print(f"{len(records)} pairs written to {args.out}")
 
 

@@ -1,7 +1,5 @@
 """Synthetic extreme-viewpoint pairs: camera geometry with exact answers, pixel-exact rendering, the EVD layout."""
 
-import math
-
 import cv2
 import numpy as np
 import pytest
@@ -124,5 +122,8 @@ def test_bad_inputs_raise_clear_errors(tmp_path):
         pair_cameras("above", 2.0, np.random.default_rng(0))
     with pytest.raises(ConfigError, match="cannot read"):
         write_viewpoint_set([tmp_path / "missing.png"], tmp_path / "set", [2.0])
+    with pytest.raises(ConfigError, match="transition tilts"):
+        write_viewpoint_set([tmp_path / "missing.png"], tmp_path / "set", [2.0, 0.5])
+    with pytest.raises(ConfigError, match="max_side"):
+        write_viewpoint_set([tmp_path / "missing.png"], tmp_path / "set", [2.0], max_side=0)
     assert not (tmp_path / "set").exists()
-    assert math.isclose(pair_cameras("side", 2.0, np.random.default_rng(0))[1].angle, 60.0)

@@ -100,6 +100,10 @@ def write_viewpoint_set(sources: list[Path], out: Path, tilts: list[float], seed
     """Render a "side" and a "crossed" pair per source image and transition tilt into the EVD layout under
     ``out`` (``1/<name>.png``, ``2/<name>.png``, ``h/<name>.txt``: image 1 -> image 2) and ``pairs.json``
     (each pair's source, configuration, tilt, cameras and sizes). Returns those records."""
+    if not all(t > 1.0 for t in tilts):
+        raise ConfigError(f"transition tilts must all be > 1, got {list(tilts)}")
+    if max_side < 32:
+        raise ConfigError(f"max_side must be at least 32 px, got {max_side}")
     images = []
     for source in sources:
         image = cv2.imread(str(source), cv2.IMREAD_COLOR)
@@ -119,7 +123,9 @@ def write_viewpoint_set(sources: list[Path], out: Path, tilts: list[float], seed
                 maps, canvases = [], []
                 for k, camera in enumerate(cameras):
                     homography, canvas = fit_canvas(camera_homography(size, camera), size, max_side)
-                    cv2.imwrite(str(out / str(k + 1) / f"{name}.png"), render(image, homography, canvas))
+                    path = out / str(k + 1) / f"{name}.png"
+                    if not cv2.imwrite(str(path), render(image, homography, canvas)):
+                        raise OSError(f"cannot write {path}")
                     maps.append(homography)
                     canvases.append(canvas)
                 gt = maps[1] @ np.linalg.inv(maps[0])
