@@ -101,6 +101,7 @@ def test_dotted_slime_options_are_refused_for_a_base_alone():
     ("aliked-lg", {"views.min_tilt": 1.2}, r"'views.min_tilt' is the threshold of Slime .* set views.min_inliers"),
     ("slime", {"views": "always", "views.min_tilt": 1.2}, "the mode is 'always'"),
     ("slime", {"views.min_tilt": 0.9}, r"views.min_tilt must be >= 1"),
+    ("slime", {"views.max_tilt": 1.2}, r"views.max_tilt must be > views.min_tilt"),
     ("rootsift", {"views": "always", "views.min_inliers": 20}, "the mode is 'always'"),
     ("slime", {"views.min_probe": 10}, r"'views.min_probe' sets the probe .* Slime on hz\+ matches block pairs"),
     ("aliked-lg", {"views.min_probe": 10}, r"method 'aliked-lg' runs the aliked-lg pipeline alone"),

@@ -52,6 +52,10 @@ class ViewConfig:
             matches' affine map (``slime.view_step.PlainTilt``, measured on 10 matches of 2 planes at least)
             shows a tilt under this: the base matched the scene where it is not foreshortened, and what limits
             the matches there is appearance or overlap, which views do not change (1: views whatever the tilt).
+        max_tilt: Slime's "auto" adds views also when the plain F^theta holds ``min_support`` matches but their
+            affine map (measured as for ``min_tilt``) shows a tilt over this: the scene is foreshortened beyond
+            what a base matches alone, so the plain matches hold only the part of it seen least obliquely
+            (inf: never).
         min_inliers: a base pipeline alone adds views while fewer of its matches than this are consistent
             with one fundamental matrix (OpenCV MAGSAC++, 3 px; a base alone finds far fewer matches than
             Slime).
@@ -69,13 +73,14 @@ class ViewConfig:
     images: str = "both"
     min_support: int = 100
     min_tilt: float = math.sqrt(2.0)
+    max_tilt: float = 8.0
     min_inliers: int = 50
     min_probe: int = 25
     screen_keypoints: int = 1024
 
     def __post_init__(self) -> None:
         self.tilts = tuple(float(t) for t in self.tilts)
-        self.min_tilt = float(self.min_tilt)
+        self.min_tilt, self.max_tilt = float(self.min_tilt), float(self.max_tilt)
         self.validate()
 
     def validate(self) -> ViewConfig:
@@ -87,6 +92,9 @@ class ViewConfig:
         check_integer("views.screen_keypoints", self.screen_keypoints, 0)
         if not self.min_tilt >= 1.0:
             raise ConfigError(f"views.min_tilt must be >= 1 (1: views whatever the matches' tilt), got {self.min_tilt}")
+        if not self.max_tilt > self.min_tilt:
+            raise ConfigError(f"views.max_tilt must be > views.min_tilt ({self.min_tilt:g}; inf: never), "
+                              f"got {self.max_tilt}")
         if not all(t > 1.0 for t in self.tilts):
             raise ConfigError(f"views.tilts must all be > 1 (1 is the image itself), got {self.tilts}")
         return self

@@ -106,6 +106,25 @@ def test_enough_plain_geometry_needs_no_view():
     assert calls == [] and state.steps == () and record.decision == "not needed" and record.tried == []
 
 
+@pytest.mark.parametrize("plain_tilt", [_tilt(8.0, 46), _tilt(12.0, view_step.TILT_MATCHES - 1),
+                                        _tilt(12.0, 46, planes=1), None])
+def test_enough_matches_at_a_measured_tilt_within_the_bases_reach_need_no_view(plain_tilt):
+    _, record, calls = _run("auto", "both", 100, GAINS, plain_tilt=plain_tilt)
+    assert calls == [] and record.decision == "not needed"
+
+
+def test_enough_matches_on_a_scene_foreshortened_beyond_the_bases_reach_get_views():
+    gains = {(0, 2.0): 10, (1, 2.0): 0, (0, 4.0): 40, (1, 4.0): 0}
+    state, record, calls = _run("auto", "both", 300, gains, gain=0.35, plain_tilt=_tilt(11.4, 397, planes=12))
+    assert calls == [(0, 2.0), (1, 2.0), (0, 4.0)]  # image 1's views hold nothing at tilt 2: image 0's go on
+    assert record.decision == "kept" and state.steps == (0, 0) and state.support == 350
+    assert record.reason.startswith("image 0's views: 50 matches on their own planes; enough")
+    _, record, _ = _run("auto", "both", 300, {key: 5 for key in gains}, gain=0.35, plain_tilt=_tilt(11.4, 397))
+    assert record.decision == "dropped"  # views that hold less than the learned bases' gain: the plain planes
+    _, record, calls = _run("auto", "both", 300, gains, plain_tilt=_tilt(11.4, 397), max_tilt=float("inf"))
+    assert calls == [] and record.decision == "not needed"
+
+
 def test_too_few_matches_that_show_no_tilt_need_no_view():
     state, record, calls = _run("auto", "both", 60, GAINS, plain_tilt=_tilt(1.3, 46))
     assert calls == [] and state.steps == () and record.decision == "not needed" and record.tried == []

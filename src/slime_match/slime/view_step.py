@@ -8,7 +8,9 @@ stopped. The policy, by ``ViewConfig.mode``:
 - "off": no view; the plain state.
 - "always": every tilt of every viewed image; the image whose branch gives F^theta (the planes the epipolar
   vote kept, Secs. 3.6-3.7) the most matches is kept.
-- "auto": nothing when the plain F^theta holds ``min_support`` matches; nothing when every block of one image
+- "auto": nothing when the plain F^theta holds ``min_support`` matches, unless their tilt (below) is over
+  ``max_tilt``: the scene is then foreshortened beyond what the base matches alone, so its matches hold only the
+  part of it seen least obliquely; nothing when every block of one image
   holds fewer keypoints than a block plane needs matches (a blank or featureless image: the other image's views
   are matched against its blocks, and its own views hold no texture it lacks); nothing either when F^theta holds
   fewer but their tilt (:class:`PlainTilt`: the stretch of their affine map, measured on ``TILT_MATCHES`` matches
@@ -158,9 +160,14 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
     if plain_tilt is not None and np.isfinite(plain_tilt.tilt):
         record.plain_tilt = {"tilt": round(plain_tilt.tilt, 3), "matches": plain_tilt.matches,
                              "planes": plain_tilt.planes}
-    if views.mode == "auto" and enough:
+    steep = plain_tilt is not None and plain_tilt.measured and plain_tilt.tilt > views.max_tilt
+    if views.mode == "auto" and enough and not steep:
         record.decision = "not needed"
         return plain, record
+    if views.mode == "auto" and enough:
+        record.reason += (f"; {plain_tilt.matches} of them, on {plain_tilt.planes} planes, lie on one affine map of "
+                          f"tilt {plain_tilt.tilt:.2f} > {views.max_tilt:.2f} (views.max_tilt): the scene is "
+                          "foreshortened beyond what the base matches alone, and views may reach more of it")
     if views.mode == "auto" and keypoints is not None and min(keypoints) < min_matches:
         image = int(np.argmin(keypoints))
         record.decision = "not needed"
