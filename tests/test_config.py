@@ -102,6 +102,8 @@ def test_dotted_slime_options_are_refused_for_a_base_alone():
     ("slime", {"views": "always", "views.min_tilt": 1.2}, "the mode is 'always'"),
     ("slime", {"views.min_tilt": 0.9}, r"views.min_tilt must be >= 1"),
     ("slime", {"views.max_tilt": 1.2}, r"views.max_tilt must be > views.min_tilt"),
+    ("slime", {"views.steep_tilts": "8,1"}, r"views.steep_tilts must all be > 1"),
+    ("aliked-lg", {"views.steep_tilts": "8"}, r"'views.steep_tilts' is the threshold of Slime"),
     ("rootsift", {"views": "always", "views.min_inliers": 20}, "the mode is 'always'"),
     ("slime", {"views.min_probe": 10}, r"'views.min_probe' sets the probe .* Slime on hz\+ matches block pairs"),
     ("aliked-lg", {"views.min_probe": 10}, r"method 'aliked-lg' runs the aliked-lg pipeline alone"),

@@ -321,6 +321,7 @@ def _refuse_unread(config: MatchConfig, given: dict[str, Any]) -> None:
 VIEW_CRITERIA = {"min_support": ("slime", "matches of F^theta, the planes Slime's epipolar vote keeps"),
                  "min_tilt": ("slime", "the tilt of F^theta's matches' affine map"),
                  "max_tilt": ("slime", "the tilt of F^theta's matches' affine map"),
+                 "steep_tilts": ("slime", "the tilt of F^theta's matches' affine map"),
                  "min_inliers": ("base", "matches consistent with one fundamental matrix")}
 
 

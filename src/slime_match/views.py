@@ -56,6 +56,9 @@ class ViewConfig:
             affine map (measured as for ``min_tilt``) shows a tilt over this: the scene is foreshortened beyond
             what a base matches alone, so the plain matches hold only the part of it seen least obliquely
             (inf: never).
+        steep_tilts: the tilts Slime's "auto" tries after ``tilts`` where the plain matches read a tilt over
+            ``max_tilt`` and no earlier tilt's views were kept: views up to 4 leave such a scene a residual tilt
+            over 2, more than the base follows (empty: none).
         min_inliers: a base pipeline alone adds views while fewer of its matches than this are consistent
             with one fundamental matrix (OpenCV MAGSAC++, 3 px; a base alone finds far fewer matches than
             Slime).
@@ -74,12 +77,14 @@ class ViewConfig:
     min_support: int = 100
     min_tilt: float = math.sqrt(2.0)
     max_tilt: float = 8.0
+    steep_tilts: tuple[float, ...] = (8.0,)
     min_inliers: int = 50
     min_probe: int = 25
     screen_keypoints: int = 1024
 
     def __post_init__(self) -> None:
         self.tilts = tuple(float(t) for t in self.tilts)
+        self.steep_tilts = tuple(float(t) for t in self.steep_tilts)
         self.min_tilt, self.max_tilt = float(self.min_tilt), float(self.max_tilt)
         self.validate()
 
@@ -97,6 +102,8 @@ class ViewConfig:
                               f"got {self.max_tilt}")
         if not all(t > 1.0 for t in self.tilts):
             raise ConfigError(f"views.tilts must all be > 1 (1 is the image itself), got {self.tilts}")
+        if not all(t > 1.0 for t in self.steep_tilts):
+            raise ConfigError(f"views.steep_tilts must all be > 1 (1 is the image itself), got {self.steep_tilts}")
         return self
 
     @property

@@ -119,10 +119,27 @@ def test_enough_matches_on_a_scene_foreshortened_beyond_the_bases_reach_get_view
     assert calls == [(0, 2.0), (1, 2.0), (0, 4.0)]  # image 1's views hold nothing at tilt 2: image 0's go on
     assert record.decision == "kept" and state.steps == (0, 0) and state.support == 350
     assert record.reason.startswith("image 0's views: 50 matches on their own planes; enough")
-    _, record, _ = _run("auto", "both", 300, {key: 5 for key in gains}, gain=0.35, plain_tilt=_tilt(11.4, 397))
-    assert record.decision == "dropped"  # views that hold less than the learned bases' gain: the plain planes
+    weak = {(image, tilt): 5 for image in (0, 1) for tilt in (2.0, 4.0, 8.0)}
+    _, record, calls = _run("auto", "both", 300, weak, gain=0.35, plain_tilt=_tilt(11.4, 397))
+    assert record.decision == "dropped" and record.tilts == [2.0, 4.0, 8.0]  # the views' planes hold too little
     _, record, calls = _run("auto", "both", 300, gains, plain_tilt=_tilt(11.4, 397), max_tilt=float("inf"))
     assert calls == [] and record.decision == "not needed"
+
+
+def test_a_scene_foreshortened_beyond_the_bases_reach_gets_the_steep_tilts_after_the_others():
+    gains = {(0, 2.0): 0, (1, 2.0): 0, (0, 4.0): 0, (1, 4.0): 0, (0, 6.0): 0, (1, 6.0): 0, (0, 8.0): 120,
+             (1, 8.0): 0}
+    state, record, calls = _run("auto", "both", 11, gains, gain=0.35, plain_tilt=_tilt(10.7, 11))
+    assert calls == [(0, 2.0), (1, 2.0), (0, 4.0), (1, 4.0), (0, 8.0), (1, 8.0)]
+    assert record.decision == "kept" and state.steps == (0, 0, 0) and record.tilts == [2.0, 4.0, 8.0]
+    for plain_tilt in (_tilt(7.9, 46), None):  # within the base's reach, or not measured: the tilts alone
+        _, record, calls = _run("auto", "both", 11, gains, gain=0.35, plain_tilt=plain_tilt)
+        assert [tilt for _, tilt in calls] == [2.0, 2.0, 4.0, 4.0] and record.decision == "dropped"
+    _, _, calls = _run("auto", "both", 11, gains, gain=0.35, plain_tilt=_tilt(10.7, 11), steep_tilts=(4.0, 6.0))
+    assert [tilt for _, tilt in calls] == [2.0, 2.0, 4.0, 4.0, 6.0, 6.0]  # a steep tilt among the tilts runs once
+    gains = gains | {(0, 2.0): 150}
+    _, record, calls = _run("auto", "both", 11, gains, gain=0.35, plain_tilt=_tilt(10.7, 11))
+    assert calls == [(0, 2.0), (1, 2.0)] and record.decision == "kept"  # kept at tilt 2: no steeper tilt
 
 
 def test_too_few_matches_that_show_no_tilt_need_no_view():

@@ -24,7 +24,8 @@ stopped. The policy, by ``ViewConfig.mode``:
   sparsely and reach fewer matches on a correct geometry), the leader is kept once the views' own planes hold
   ``gain`` of its F^theta matches and its F^theta holds ``min_support`` or ``gain`` more than the plain one
   (matches the views only moved onto the images' own planes, through the vote, are no sign that the views found
-  the scene's geometry); until then the next tilt continues every branch whose views' own planes hold at least
+  the scene's geometry); until then the next tilt (``tilts``, then ``steep_tilts`` where the plain tilt is over
+  ``max_tilt``) continues every branch whose views' own planes hold at least
   half the F^theta matches of the branch whose views' planes hold the most (for the same reason counted on the
   views' planes only; a lead within a factor of two is noise, not a sign of which image the scene's tilt
   compresses; every branch when no views' planes hold any), and the leader is chosen among the branches that ran
@@ -186,7 +187,9 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
     on_views: dict[int, int] = {}  # per image: those on its views' planes
     ranges: dict[int, list[tuple[int, int]]] = {}  # per image: the plane ranges of its steps in its branch
     leader, contenders = None, views.viewed
-    for tilt in views.tilts:
+    steeper = views.steep_tilts if steep and views.mode == "auto" else ()
+    schedule = views.tilts + tuple(t for t in steeper if t not in views.tilts)
+    for tilt in schedule:
         for image in contenders:
             state = branches.get(image, plain)
             found = find(image, tilt)
