@@ -132,6 +132,8 @@ def test_a_scene_foreshortened_beyond_the_bases_reach_gets_the_steep_tilts_after
     state, record, calls = _run("auto", "both", 11, gains, gain=0.35, plain_tilt=_tilt(10.7, 11))
     assert calls == [(0, 2.0), (1, 2.0), (0, 4.0), (1, 4.0), (0, 8.0), (1, 8.0)]
     assert record.decision == "kept" and state.steps == (0, 0, 0) and record.tilts == [2.0, 4.0, 8.0]
+    assert record.reason.endswith("the plain matches' affine map reads a tilt of 10.70 > 8.00 (views.max_tilt): "
+                                  "views tried whatever F^theta held, tilts 8 after the others")
     for plain_tilt in (_tilt(7.9, 46), None):  # within the base's reach, or not measured: the tilts alone
         _, record, calls = _run("auto", "both", 11, gains, gain=0.35, plain_tilt=plain_tilt)
         assert [tilt for _, tilt in calls] == [2.0, 2.0, 4.0, 4.0] and record.decision == "dropped"

@@ -222,6 +222,10 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
                     f"and {views.min_support} in all or {min_gain} more)" if leader is not None else "no view")
             leader, record.decision = None, "dropped"
             record.reason = f"every view tried, and F^theta holds {best}: the planes of the images alone are kept"
+    if steep and views.mode == "auto":
+        record.reason += (f"; the plain matches' affine map reads a tilt of {plain_tilt.tilt:.2f} > "
+                          f"{views.max_tilt:.2f} (views.max_tilt): views tried whatever F^theta held"
+                          + (f", tilts {', '.join(f'{t:g}' for t in steeper)} after the others" if steeper else ""))
     final = plain if leader is None else branches[leader]
     steps = iter(ranges.get(leader, []))
     for step in record.tried:
