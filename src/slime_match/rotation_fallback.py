@@ -4,7 +4,8 @@ ALIKED (n16, n32), DISK and XFeat describe every keypoint upright. The quarter-t
 (:mod:`slime_match.quarter_turns`) turns image 1 back by a multiple of 90 degrees, but a roll between the images
 in between (a hand-held camera tilted sideways, 30-70 degrees) leaves such a base with no consistent matches
 at all: no plane passes the epipolar vote and Slime returns nothing. Hz+ estimates each keypoint's orientation,
-so the same pair gives it matches to read planes from. When Slime on an upright base ends with no match, the
+so the same pair gives it matches to read planes from (and its affine-shaped patches follow a plane seen nearly
+edge-on, which leaves ALIKED nothing either). When Slime on an upright base ends with no match, the
 matcher therefore runs Slime once more on :data:`FALLBACK_BASE` (its own default options, ``descriptor``
 "auto") on the same working images, and returns that run's matches when its F^theta holds
 ``views.min_support`` matches, the consistent geometry by which Slime needs no views; a pair that shares nothing
