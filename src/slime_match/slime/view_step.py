@@ -165,10 +165,6 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
     if views.mode == "auto" and enough and not steep:
         record.decision = "not needed"
         return plain, record
-    if views.mode == "auto" and enough:
-        record.reason += (f"; {plain_tilt.matches} of them, on {plain_tilt.planes} planes, lie on one affine map of "
-                          f"tilt {plain_tilt.tilt:.2f} > {views.max_tilt:.2f} (views.max_tilt): the scene is "
-                          "foreshortened beyond what the base matches alone, and views may reach more of it")
     if views.mode == "auto" and keypoints is not None and min(keypoints) < min_matches:
         image = int(np.argmin(keypoints))
         record.decision = "not needed"
