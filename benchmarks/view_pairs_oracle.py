@@ -1,13 +1,14 @@
 """What a method finds between simulated views, view by view: on pairs with a ground-truth homography (an
 EVD-style folder), the method between each view of image 0 and each of image 1 at one tilt (``--images both``, as
 ASIFT pairs its views), or between each view of one image and the other image as it is (``image0``, ``image1``),
-with the matches within ``--px`` of the ground truth and the EVD protocol's mAA per view (pair).
+with the matches correct within ``--px`` of the ground truth (both ways, as ``slime bench`` counts them) and the
+EVD protocol's mAA per view (pair).
 
     python benchmarks/view_pairs_oracle.py synth5 --pairs v_wormhole_1_crossed32 --tilt 4 [--step 18]
         [--images both|image0|image1] [--method aliked-lg] [--out results/view_pairs_oracle.json]
 
-Each view is ``slime_match.views.simulate_view`` of the image (its rotation, blur and subsampling); the method runs
-on the view images with its own views and rotation fallback off, its matches are mapped back to the original
+Each view is ``slime_match.views.simulate_view`` of the image (its rotation, blur and subsampling); the method
+runs on the view images with its own views and rotation fallback off, its matches are mapped back to the original
 images and kept where they lie inside them (a view's corners show the warp's reflected border). The best view
 (pair) is an upper bound on what one view (pair) gives the method, since the ground truth picks it.
 """
@@ -23,9 +24,9 @@ import numpy as np
 from slime_match import Matcher, make_config
 from slime_match.eval.bench_config import BenchConfig
 from slime_match.eval.datasets import load_dataset
+from slime_match.eval.metrics.correctness import correct_matches_homography
 from slime_match.eval.predictions import load_pair_images
 from slime_match.eval.scoring import evaluate_protocol, pair_gt
-from slime_match.geometry.homography import project
 from slime_match.views import simulate_view
 
 
@@ -58,10 +59,10 @@ def view_pairs(matcher: Matcher, pair, images: str, tilt: float, step: float, px
             xy0, inside0 = _to_original(result.keypoints0, view0)
             xy1, inside1 = _to_original(result.keypoints1, view1)
             xy0, xy1 = xy0[inside0 & inside1], xy1[inside0 & inside1]
-            error = np.linalg.norm(project(pair.H, xy0)[0] - xy1, axis=1) if len(xy0) else np.zeros(0)
             scores = evaluate_protocol("evd", gt, {"m": (xy0, xy1)}, BenchConfig(thresholds=["none"]))["m"]
-            rows.append({"angle0": angle0, "angle1": angle1, "matches": len(xy0),
-                         "correct": int((error < px).sum()), "maa": round(float(scores["maa"]), 3)})
+            correct = int(correct_matches_homography(xy0, xy1, pair.H, px).sum())
+            rows.append({"angle0": angle0, "angle1": angle1, "matches": len(xy0), "correct": correct,
+                         "maa": round(float(scores["maa"]), 3)})
     return sorted(rows, key=lambda row: (-row["correct"], -row["matches"]))
 
 
@@ -78,7 +79,8 @@ def main() -> None:
     parser.add_argument("--images", choices=("both", "image0", "image1"), default="both",
                         help="whose views: both images' (every pair of views), or one image's against the other")
     parser.add_argument("--method", default="aliked-lg", help="the method run on each view (pair)")
-    parser.add_argument("--px", type=float, default=10.0, help="a match is correct within this many px of the GT")
+    parser.add_argument("--px", type=float, default=10.0,
+                        help="a match is correct within this many px of the GT (both ways)")
     parser.add_argument("--out", type=Path, default=None, help="JSON file to write (every view (pair) of each pair)")
     args = parser.parse_args()
     if args.tilt < 1.0 or args.step <= 0.0:
