@@ -50,10 +50,12 @@ def test_the_parser_offers_what_the_code_accepts():
     assert set(methods()) <= set(PRESETS)  # Slime and every base alone, by its name
     assert offered["base"] == BASE_NAMES
     assert offered["detection"] == choices.DETECTIONS and offered["tile_test"] == choices.TILE_TESTS
-    assert offered["rotation_fallback"] == offered["quarter_turns"] == ("auto", "off")
-    args = build_parser().parse_args(["match", "a.png", "b.png", "-o", "out", "--method", "slime-aliked",
-                                      "--rotation-fallback", "off"])
-    assert config_of(args).rotation_fallback == "off"
+    assert offered["quarter_turns"] == ("auto", "off")
+    assert offered["rotation_fallback"] == ("auto", "edge-on", "off")
+    for mode in ("off", "edge-on"):
+        args = build_parser().parse_args(["match", "a.png", "b.png", "-o", "out", "--method", "slime-aliked",
+                                          "--rotation-fallback", mode])
+        assert config_of(args).rotation_fallback == mode
 
 
 def test_bench_names_no_development_folder(capsys):

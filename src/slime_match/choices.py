@@ -40,7 +40,8 @@ VIEW_IMAGES = ("image0", "image1", "both")  # which images get simulated views (
 # the flat options of one match (make_config's names) that the command line and the web app both offer, with
 # their choices (None: a value read by the option's type); the command line also takes method and weights_dir
 QUARTER_TURN_MODES = ("auto", "off")  # Slime's check of how image 1 is turned (quarter_turns)
-ROTATION_FALLBACK_MODES = ("auto", "off")  # Slime on Hz+ where an upright base finds no match (rotation_fallback)
+# Slime on Hz+ where an upright base finds no match; "edge-on": also where it shows no tilt (rotation_fallback)
+ROTATION_FALLBACK_MODES = ("auto", "edge-on", "off")
 MATCH_OPTIONS = {
     "base": (*BUILTIN_BASES, *LEARNED_BASES), "descriptor": DESCRIPTOR_CHOICES, "shape": SHAPE_METHODS,
     "orientation": ORIENTATION_CHOICES, "upright": None, "ransac": RANSAC_CHOICES, "threshold": None,

@@ -74,7 +74,10 @@ class MatchConfig:
             image 1 turned when one is the clear winner (:mod:`slime_match.quarter_turns`); "off": never.
         rotation_fallback: "auto" (default): where Slime on a base upright by design finds no match (images
             rolled against each other by other than quarter turns), Slime runs again on Hz+, which estimates
-            orientations, and its matches are returned where its F^theta holds ``views.min_support`` matches
+            orientations on affine-shaped patches, and its matches are returned where its F^theta holds
+            ``views.min_support`` matches; "edge-on": also where the base's views were kept while its plain
+            matches show no tilt (a plane seen nearly edge-on: Hz+'s plain stage first, the rest only where it
+            measures one), Hz+'s matches returned where they also outnumber the first run's at its density
             (:mod:`slime_match.rotation_fallback`); "off": never.
         auto_choice: what the "auto" method took and what it passed over (:mod:`slime_match.auto_method`);
             empty when a preset was named.

@@ -80,8 +80,8 @@ class Matcher:
             pool_base = dataclasses.replace(base, name=self.config.slime.pool)
             self._resolve_descriptor(pool_base)
             self.pooled = PooledBase(make_base_pipeline(pool_base, self.device), _level_cache(feature_cache_mb))
-        self.rotation_fallback = None  # Slime on a rotation-invariant base where an upright base finds no match
-        if (self.config.method == "slime" and self.config.rotation_fallback == "auto"
+        self.rotation_fallback = None  # Slime on Hz+ where an upright base finds no match (or no tilt: "edge-on")
+        if (self.config.method == "slime" and self.config.rotation_fallback != "off"
                 and self.pipeline.upright_by_design()):
             self.rotation_fallback = RotationFallback(self.device, base.weights_dir, _level_cache(feature_cache_mb))
 
@@ -140,10 +140,11 @@ class Matcher:
         if config.method == "slime":
             output = run_slime(self.pipeline, array0, array1, config.slime, timer, seed=config.seed,
                                level_cache=self.level_cache, views=config.views, pooled=self.pooled)
-            if not len(output.xy0) and self.rotation_fallback is not None:
+            if self.rotation_fallback is not None and (trigger := self.rotation_fallback.trigger(output, config.rotation_fallback)):
                 with timer("rotation_fallback"):
                     output, decisions["rotation_fallback"] = self.rotation_fallback.run(
-                        output, self.pipeline.name, array0, array1, config.slime, config.seed, config.views)
+                        output, trigger, self.pipeline.name, self.pipeline.slime_view_gain, array0, array1,
+                        config.slime, config.seed, config.views)
             xy0, xy1, scores, counts, stages = output.xy0, output.xy1, output.scores, output.counts, output.stages
             warnings += output.warnings
             decisions |= output.decisions

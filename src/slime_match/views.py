@@ -252,7 +252,8 @@ class ViewRecord:
             kept).
         reason: why the views stopped (or why none was tried), in words.
         plain_tilt: Slime's plain F^theta's matches' tilt: their affine map's ``tilt``, how many ``matches`` it
-            holds and on how many ``planes`` (``slime.view_step.PlainTilt``); None when no map fits.
+            holds, on how many ``planes``, and whether that is enough to be the scene's (``measured``;
+            ``slime.view_step.PlainTilt``); None when no map fits.
     """
 
     mode: str

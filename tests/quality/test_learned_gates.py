@@ -10,7 +10,7 @@ tyn by 0.59: such pairs would make a gate of chance); graf 1->3 with image 1 tur
 quarter-turn check turns back; a ScanNet pair rolled by 72 degrees, where Slime on ALIKED finds no match and
 the rotation fallback's Slime on Hz+ gives the matches; and EVD shop, solved by image 0's tilt-2 views (mAA
 0.93 at seeds 0, 1 and 2, 1284-1306 correct; 0.40 with the views off), the simulated views of the default
-method.
+method; and graf img1 seen at 85 degrees, where ``rotation_fallback="edge-on"`` takes Slime on Hz+.
 
 Measured with ``python tests/quality/gates.py METHOD PAIR ...`` on a 2-core x86-64 CPU.
 """
@@ -19,6 +19,13 @@ import json
 
 import pytest
 from conftest import DATA, require, require_learned_weights
+
+import slime_match as sm
+from slime_match.eval.bench_config import BenchConfig
+from slime_match.eval.datasets import load_dataset
+from slime_match.eval.datasets.viewpoints import write_viewpoint_set
+from slime_match.eval.predictions import load_pair_images
+from slime_match.eval.scoring import evaluate_protocol, pair_gt
 
 from .gates import measure, prediction, shortfalls
 
@@ -55,3 +62,23 @@ def test_a_rolled_scannet_pair_gets_its_matches_from_the_fallback():
     assert record["kept"] and record["other_run"]["base"] == "aliked-lg", record["reason"]
     assert record["other_run"]["counts"]["ftheta_matches"] == 0
     assert row.correct >= 400 and row.precision >= 0.7, row
+
+
+def test_edge_on_takes_hz_plus_where_alikeds_views_found_a_plane_its_plain_matches_show_no_tilt_of(tmp_path):
+    """graf img1 against itself seen at 85 degrees (transition tilt 12, rendered by ``write_viewpoint_set``):
+    Slime on ALIKED keeps the views of a band of chance matches (mAA 0.00), its plain F^theta on no affine
+    map; under ``rotation_fallback="edge-on"`` Hz+'s plain stage measures a tilt (6.2), its views hold 2133
+    F^theta matches and its 1380 matches are returned, EVD mAA 0.98 over 10 orders (1.00 in the given order)."""
+    require(DATA / "oxford_graf")
+    require_learned_weights("aliked-n16", "lightglue-aliked")
+    write_viewpoint_set([DATA / "oxford_graf" / "img1.png"], tmp_path, [8.0, 12.0], seed=0)
+    pair = {p.name.split("/")[-1]: p for p in load_dataset(f"evd:{tmp_path}")}["oxford_graf_img1_side12"]
+    images = load_pair_images(pair)
+    result = sm.match(*images, "slime-aliked", device="cpu", rotation_fallback="edge-on")
+    record = result.summary["decisions"]["rotation_fallback"]
+    assert record["trigger"] == "no tilt" and record["kept"], record["reason"]
+    first_views = record["other_run"]["decisions"]["views"]  # ALIKED's: kept, with no measured plain tilt
+    assert first_views["decision"] == "kept" and not first_views.get("plain_tilt", {}).get("measured", False)
+    scores = evaluate_protocol("evd", pair_gt(pair, images), {"edge-on": (result.keypoints0, result.keypoints1)},
+                               BenchConfig(thresholds=["none"], protocol_orders=10))["edge-on"]
+    assert scores["maa_mean"] >= 0.85 * 0.98 and len(result.scores) >= 0.85 * 1380, scores

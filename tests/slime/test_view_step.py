@@ -151,7 +151,7 @@ def test_too_few_matches_that_show_no_tilt_need_no_view():
                              "46 of them, on 3 planes, lie on one affine map of tilt 1.30 < 1.41 (views.min_tilt): "
                              "the scene is not foreshortened where the images match, and views undo "
                              "foreshortening")
-    assert record.as_dict()["plain_tilt"] == {"tilt": 1.3, "matches": 46, "planes": 3}
+    assert record.as_dict()["plain_tilt"] == {"tilt": 1.3, "matches": 46, "planes": 3, "measured": True}
 
 
 @pytest.mark.parametrize("keypoints", [(0, 900), (900, 7)])

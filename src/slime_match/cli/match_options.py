@@ -88,9 +88,12 @@ def add_match_options(parser: argparse.ArgumentParser) -> None:
                                 "turned when one is the clear winner; 'off': never")
     internals.add_argument("--rotation-fallback", default=None, choices=ROTATION_FALLBACK_MODES,
                            help="Slime on a base upright by design: 'auto' (default) runs Slime again on hz+ "
-                                "(orientation estimated) where it finds no match, as between images rolled by "
-                                "other than quarter turns, and returns those matches where they hold consistent "
-                                "geometry (views.min_support); 'off': never")
+                                "(orientation estimated, affine-shaped patches) where it finds no match, as "
+                                "between images rolled by other than quarter turns, and returns those matches "
+                                "where they hold consistent geometry (views.min_support); 'edge-on' also where "
+                                "its views were kept while its plain matches show no tilt, as on a plane seen "
+                                "nearly edge-on (hz+'s plain stage first; its matches where they also outnumber "
+                                "the first run's at its density); 'off': never")
     everyday.add_argument("--views", default=None, choices=VIEW_MODES,
                           help="simulated views for extreme viewpoints (ASIFT tilts 2 then 4 of both images; "
                                "--set views.images=image0|image1 for one; for Slime and a base pipeline alone): "

@@ -140,7 +140,7 @@ class SlimeOutput:
     """Final matches (original px), counts per stage, warnings (why a result is empty, slow layouts), the
     rules that decided adaptive stages and why (e.g. ``{"vote": "consensus", "vote_reason": ...}``) with the
     block detection and block matching the run took (the base's defaults where the configuration leaves them
-    None), and optionally every stage's arrays."""
+    None), optionally every stage's arrays, and the tilt of the plain F^theta's matches (before any view)."""
 
     xy0: np.ndarray
     xy1: np.ndarray
@@ -149,6 +149,7 @@ class SlimeOutput:
     stages: dict[str, np.ndarray] | None
     warnings: list[str] = field(default_factory=list)
     decisions: dict[str, str] = field(default_factory=dict)
+    plain_tilt: PlainTilt | None = None
 
 
 @dataclass
@@ -252,7 +253,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
         return _select(found, layout, config, workers, timer)
 
     plain = PlaneState(planes, *select(planes), list(layout.blocks0), list(layout.blocks1))
-    plain_tilt = None if views.mode == "off" else PlainTilt.of(plain, size1)
+    plain_tilt = PlainTilt.of(plain, size1)
     keypoints = tuple(max((len(core) for level in levels for core in level.members), default=0)
                       for levels in features.levels[:2])
     state, record = add_views(plain, views, find, select, pipeline.slime_view_gain, plain_tilt, keypoints,
@@ -295,7 +296,7 @@ def run_slime(pipeline: BasePipeline, image0: np.ndarray, image1: np.ndarray, co
                  "detection": detection, "block_matching": matching, **pool_decisions}
     if final.dtm_frame:
         decisions["global_dtm"] = final.dtm_frame
-    return SlimeOutput(final.xy0, final.xy1, final.scores, counts, stages, warnings, decisions)
+    return SlimeOutput(final.xy0, final.xy1, final.scores, counts, stages, warnings, decisions, plain_tilt)
 
 
 def _select(planes: BlockPlanes, layout: Layout, config: SlimeConfig, workers: int, timer: StageTimer

@@ -160,7 +160,7 @@ def add_views(plain: PlaneState, views: ViewConfig, find: Callable[[int, float],
     min_gain = math.ceil(gain * views.min_support)
     if plain_tilt is not None and np.isfinite(plain_tilt.tilt):
         record.plain_tilt = {"tilt": round(plain_tilt.tilt, 3), "matches": plain_tilt.matches,
-                             "planes": plain_tilt.planes}
+                             "planes": plain_tilt.planes, "measured": plain_tilt.measured}
     steep = plain_tilt is not None and plain_tilt.measured and plain_tilt.tilt > views.max_tilt
     if views.mode == "auto" and enough and not steep:
         record.decision = "not needed"
