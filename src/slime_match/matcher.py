@@ -140,9 +140,10 @@ class Matcher:
         if config.method == "slime":
             output = run_slime(self.pipeline, array0, array1, config.slime, timer, seed=config.seed,
                                level_cache=self.level_cache, views=config.views, pooled=self.pooled)
-            if self.rotation_fallback is not None and (trigger := self.rotation_fallback.trigger(output, config.rotation_fallback)):
+            fallback = self.rotation_fallback
+            if fallback is not None and (trigger := fallback.trigger(output, config.rotation_fallback)):
                 with timer("rotation_fallback"):
-                    output, decisions["rotation_fallback"] = self.rotation_fallback.run(
+                    output, decisions["rotation_fallback"] = fallback.run(
                         output, trigger, self.pipeline.name, self.pipeline.slime_view_gain, array0, array1,
                         config.slime, config.seed, config.views)
             xy0, xy1, scores, counts, stages = output.xy0, output.xy1, output.scores, output.counts, output.stages

@@ -110,7 +110,7 @@ class RotationFallback:
         else:
             logger.info("Slime on %s saw no geometry of the scene before its views: running Slime on %s "
                         "(affine-shaped patches)", first_base, FALLBACK_BASE)
-            reason = (f"Slime on {first_base} needed views and its plain F^theta shows no tilt (not "
+            reason = (f"Slime on {first_base} kept views while its plain F^theta shows no tilt (not "
                       f"{TILT_MATCHES} matches on one affine map from {TILT_PLANES} planes); Slime on "
                       f"{FALLBACK_BASE}, whose affine-shaped patches follow a foreshortened plane, ")
             look = run_slime(pipeline, image0, image1, dataclasses.replace(own, refine_tiles=False, keep_stages=False),
@@ -127,12 +127,10 @@ class RotationFallback:
         reason += f"holds {support} matches in F^theta "
         if support < views.min_support:
             reason += f"(< views.min_support {views.min_support}, too little consistent geometry)"
-        elif not kept:
-            reason += (f"({gain:g} x {support} at {first_base}'s density, not more than its {first_support})")
         else:
-            reason += f"(>= views.min_support {views.min_support}"
-            reason += (f"; {gain:g} x {support} at {first_base}'s density > its {first_support})" if first_support
-                       else ")")
+            density = (f"{gain:g} x {support} = {gain * support:.0f} at {first_base}'s density "
+                       f"{'>' if kept else '<='} its {first_support}")
+            reason += f"(>= views.min_support {views.min_support}{'; ' + density if first_support else ''})"
         if kept:
             reason += f": its {len(second.xy0)} matches are returned"
             taken, other, other_base = second, first, first_base
