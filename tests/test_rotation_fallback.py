@@ -1,8 +1,8 @@
 """The rotation fallback: where Slime on a base upright by design finds no match, or keeps views without its
 plain matches measuring a tilt, Slime runs again on Hz+ (the latter first on its plain stage) and its matches
 come back, where they hold more geometry, with a record of both runs ("edge-on" only for the latter); "off"
-never runs it; the option is Slime's. Its real-data gate (a rolled ScanNet pair) is in
-``quality/test_learned_gates.py``."""
+never runs it; the option is Slime's. Its real-data gates (a rolled ScanNet pair; graf seen at 85 degrees under
+"edge-on") are in ``quality/test_learned_gates.py``."""
 
 import json
 
