@@ -33,5 +33,5 @@ python -m slime_match.eval.bench "evd:$DATA/hard/evd" "wxbs:$DATA/hard/wxbs" --t
     --seed 0 --methods "$HARD_METHODS" -o "$OUT_HARD" "$@"
 python -m slime_match.eval.bench graf hpatches scannet-sample motorcycle --data-root "$DATA" \
     --rotations "$ROTATIONS" --thresholds none,5,3,2,1 --seed 0 --methods "$METHODS" -o "$OUT" "$@"
-python -m slime_match.eval.report "$OUT" --extra "$OUT_HARD" --doc docs/results.md \
+python -m slime_match.eval.report "$OUT" --extra "$OUT_HARD" --doc docs/results.md --data-root "$DATA" \
   --command "benchmarks/run_results.sh $*"

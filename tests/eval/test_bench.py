@@ -255,3 +255,20 @@ def test_results_doc_holds_every_folder_with_its_code(first_run, tmp_path):
     assert text.count(f"code `{code_version()}`") == 2 and "\n## evd, wxbs\n" in text
     assert text.index(f"`{out}`") < text.index("## evd, wxbs") < text.index(f"`{extra}`")
     assert (extra / "table.md").stat().st_size > 0
+    assert "/data/evd" in text and "DATA/" not in text
+
+
+def test_results_doc_writes_the_data_folder_as_DATA(first_run, tmp_path):
+    """``--data-root R``: the datasets' paths under R read ``DATA/...`` in the document, wherever R was."""
+    from slime_match.eval import report
+
+    out, _ = first_run
+    extra = tmp_path / "hard"
+    shutil.copytree(out, extra)
+    summary = json.loads((extra / "metrics.json").read_text())
+    summary["config"]["datasets"] = ["evd:../lab/data/hard/evd", "wxbs:../lab/data/hard/wxbs"]
+    (extra / "metrics.json").write_text(json.dumps(summary))
+    doc = tmp_path / "results.md"
+    assert report.main([str(out), "--extra", str(extra), "--doc", str(doc), "--data-root", "../lab/data/"]) == 0
+    text = doc.read_text()
+    assert "../lab" not in text and "datasets: evd:DATA/hard/evd, wxbs:DATA/hard/wxbs;" in text
