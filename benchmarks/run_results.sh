@@ -6,9 +6,9 @@
 #
 #   benchmarks/run_results.sh [extra slime-bench options, e.g. --device cuda]
 #
-# About two hours on 2 CPU cores (15 hard pairs and 46 planar and non-planar pairs; the Slime presets take
-# 10-40 s a pair and up to 110 s where simulated views are tried, Slime on DISK about 2 minutes a pair, DISK
-# alone about one); run it on a quiet machine, as the report
+# About two hours on 2 CPU cores (the 15 hard pairs about 70 minutes, the 46 planar and non-planar pairs about
+# 50; the Slime presets take 10-40 s a pair and up to 150 s where simulated views are tried and dropped, DISK
+# alone about 40 s); run it on a quiet machine, as the report
 # gives seconds per pair. Resumable: predictions are cached in $OUT/predictions and $OUT_HARD/predictions
 # with the code version that computed them, so an interrupted run continues where it stopped and a rerun
 # only recomputes metrics. Every method runs at its default settings; the main table gives each method at
