@@ -7,6 +7,7 @@ import json
 import logging
 import math
 import shutil
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -237,17 +238,23 @@ def test_pose_pair_gets_auc(tmp_path):
     assert "### Pose AUC" in table and "| OpenCV SIFT | 2 |" in table
 
 
+def _hard_folder(out: Path, tmp_path: Path, datasets: list[str]) -> Path:
+    """A copy of the results folder ``out`` that says it scored ``datasets`` (a second folder for the doc)."""
+    extra = tmp_path / "hard"
+    shutil.copytree(out, extra)
+    summary = json.loads((extra / "metrics.json").read_text())
+    summary["config"]["datasets"] = datasets
+    (extra / "metrics.json").write_text(json.dumps(summary))
+    return extra
+
+
 def test_results_doc_holds_every_folder_with_its_code(first_run, tmp_path):
     """``python -m slime_match.eval.report A --extra B --doc D``: D quotes the command, then A's tables and
     B's under a heading of B's datasets, each with the code versions of its predictions."""
     from slime_match.eval import report
 
     out, _ = first_run
-    extra = tmp_path / "hard"
-    shutil.copytree(out, extra)
-    summary = json.loads((extra / "metrics.json").read_text())
-    summary["config"]["datasets"] = ["evd:/data/evd", "wxbs:/data/wxbs"]
-    (extra / "metrics.json").write_text(json.dumps(summary))
+    extra = _hard_folder(out, tmp_path, ["evd:/data/evd", "wxbs:/data/wxbs"])
     doc = tmp_path / "results.md"
     assert report.main([str(out), "--extra", str(extra), "--doc", str(doc), "--command", "run it"]) == 0
     text = doc.read_text()
@@ -263,11 +270,7 @@ def test_results_doc_writes_the_data_folder_as_DATA(first_run, tmp_path):
     from slime_match.eval import report
 
     out, _ = first_run
-    extra = tmp_path / "hard"
-    shutil.copytree(out, extra)
-    summary = json.loads((extra / "metrics.json").read_text())
-    summary["config"]["datasets"] = ["evd:../lab/data/hard/evd", "wxbs:../lab/data/hard/wxbs"]
-    (extra / "metrics.json").write_text(json.dumps(summary))
+    extra = _hard_folder(out, tmp_path, ["evd:../lab/data/hard/evd", "wxbs:../lab/data/hard/wxbs"])
     doc = tmp_path / "results.md"
     assert report.main([str(out), "--extra", str(extra), "--doc", str(doc), "--data-root", "../lab/data/"]) == 0
     text = doc.read_text()
