@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 from typing import Any
@@ -68,9 +69,8 @@ def write_results_doc(results: str | Path, doc: str | Path, command: str,
             lines += ["", f"## {', '.join(d.split(':')[0] for d in summary['config']['datasets'])}", ""]
         lines += _section(folder, summary)
     text = "\n".join(lines)
-    if data_root:
-        for prefix in {data_root.rstrip("/"), str(Path(data_root))}:
-            text = text.replace(prefix + "/", "DATA/")
+    if data_root:  # the folder where a path starts, not inside a longer name ("data" in "mydata/")
+        text = re.sub(r"(?<![\w./-])" + re.escape(data_root.rstrip("/")) + "/", "DATA/", text)
     save_text(Path(doc), text)
 
 
